@@ -1,0 +1,41 @@
+# rally3d: `make demo` and `make test` each create/refresh the virtual environment, then do their job.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+STAMP  := $(VENV)/.rally3d-installed
+DEMO   ?= runs/demo
+SAMPLE := datasets/sample/padel_sample
+
+.PHONY: venv demo test test-all bench clean help
+
+help:
+	@echo "make demo   - set up .venv and run rally3d on the embedded sample clip"
+	@echo "make test   - set up .venv and run the test suite (without slow tests)"
+	@echo "make test-all - also the slow tests"
+
+# The venv is rebuilt only when the dependency list changes. torch is installed first, alone, so pip
+# takes the local CPU wheel (a later resolution that admits newer torch would pull the CUDA build).
+$(STAMP): pyproject.toml constraints.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --disable-pip-version-check torch==2.13.0
+	$(PIP) install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+	$(PY) -c "import torch, cv2; assert torch.__version__.startswith('2.13.0'), torch.__version__"
+	@! $(PIP) show -q opencv-python torchvision 2>/dev/null || { echo "opencv-python or torchvision got installed; only opencv-python-headless is allowed"; exit 1; }
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+test: venv
+	$(PY) -m pytest -m "not slow" -q
+
+test-all: venv
+	$(PY) -m pytest -q
+
+demo: venv
+	rm -rf $(DEMO) && mkdir -p $(DEMO) && cp -r $(SAMPLE) $(DEMO)/
+	$(VENV)/bin/rally3d check $(DEMO)/padel_sample
+	$(VENV)/bin/rally3d calibrate $(DEMO)/padel_sample
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,51 @@
+"""The ``rally3d`` command: a dispatcher over subcommands that packages register as entry points.
+
+Each package declares its subcommands in ``pyproject.toml`` under the entry-point group
+``rally3d.commands``; an entry point is a function ``register(subparsers)`` that adds one subparser and
+sets ``func`` (called with the parsed namespace, returning an exit code). The dispatcher never imports
+``training`` or ``labeler`` by name, so the package arrows stay one-way.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from importlib.metadata import entry_points
+
+from inference.clipio.errors import FormatError
+
+GROUP = "rally3d.commands"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="rally3d",
+        description="3D replays of padel and tennis rallies from one fixed camera.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        try:
+            register = ep.load()
+        except Exception as e:  # a broken optional package must not break the other commands
+            print(f"rally3d: warning: command {ep.name!r} is unavailable ({type(e).__name__}: {e})",
+                  file=sys.stderr)
+            continue
+        register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0 if args.command is None else 2
+    try:
+        return int(args.func(args) or 0)
+    except (FormatError, FileNotFoundError, KeyError, ValueError) as e:
+        msg = e.args[0] if isinstance(e, KeyError) and e.args else e
+        print(f"rally3d {args.command}: error: {msg}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
