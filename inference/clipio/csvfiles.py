@@ -1,0 +1,242 @@
+"""Readers and writers for the CSV files of a clip folder (docs/formats.md).
+
+Readers validate everything and raise :class:`~inference.clipio.errors.FormatError` naming the file,
+the line and the fix; rows may come in any order and are returned sorted. Writers are atomic and
+deterministic: header, then rows sorted by frame, normalised coordinates with 7 decimals and metres
+with 5.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from .csvtable import CsvTable, closest, duplicated, format_floats, format_ints, write_csv
+from .tables import BALL3D_KINDS, EVENT_LABELS, Ball3D, BallTrack, CourtPoints, HitEvents, InactiveBalls
+
+BALL_COLUMNS = ("frame", "visibility", "x", "y")
+INACTIVE_BALLS_COLUMNS = ("frame", "ball_no", "x", "y")
+EVENTS_COLUMNS = ("frame", "event")
+COURT_POINTS_COLUMNS = ("name", "x", "y")
+BALL_3D_COLUMNS = ("frame", "x_m", "y_m", "z_m", "segment", "kind", "sigma_m")
+
+UNIT_DECIMALS = 7
+METRE_DECIMALS = 5
+
+VISIBILITY_FIX = "visibility is 0 not in frame, 1 visible, 2 hard to see, 3 occluded"
+
+
+def _frames(table: CsvTable, n_frames: int | None, *, unique: bool = True) -> np.ndarray:
+    frame = table.ints("frame")
+    table.check_frames(frame, n_frames=n_frames, unique=unique)
+    return frame
+
+
+def _unit_xy(table: CsvTable, *, allow_empty: bool = False) -> np.ndarray:
+    return np.stack(
+        [table.floats("x", allow_empty=allow_empty), table.floats("y", allow_empty=allow_empty)], axis=1
+    ).reshape(len(table), 2)
+
+
+# ----------------------------------------------------------------------------------------- ball.csv
+def read_ball_csv(path: str | Path, *, n_frames: int | None = None) -> BallTrack:
+    """Read ``ball.csv`` (``frame,visibility,x,y``).
+
+    Args:
+        path: the file.
+        n_frames: frames of the video, when known; rows at or beyond it are rejected.
+
+    Returns:
+        The track, sorted by frame. Visibility-0 rows may leave x,y empty or write 0,0; both give NaN.
+    """
+    table = CsvTable.read(path, BALL_COLUMNS)
+    frame = _frames(table, n_frames)
+    visibility = table.ints("visibility")
+    table.check(
+        (visibility < 0) | (visibility > 3),
+        lambda i: f"visibility {visibility[i]} is not in 0..3",
+        fix=VISIBILITY_FIX,
+    )
+    xy = _unit_xy(table, allow_empty=True)
+    visible = visibility > 0
+    table.check(
+        visible & np.isnan(xy).any(axis=1),
+        lambda i: f"visibility {visibility[i]} but x or y is empty",
+        fix="write the ball centre, or set visibility 0 when the ball is not in the frame",
+    )
+    table.check(
+        ~visible & (np.nan_to_num(xy) != 0).any(axis=1),
+        "visibility 0 but x,y give a position",
+        fix="set visibility 1-3 when the ball is in the frame, or leave x,y empty",
+    )
+    xy[~visible] = np.nan
+    xy = table.unit_coords(xy, ("x", "y"))
+    order = np.argsort(frame, kind="stable")
+    return BallTrack(frame[order], visibility[order], xy[order])
+
+
+def write_ball_csv(path: str | Path, track: BallTrack) -> Path:
+    """Write ``track`` to ``ball.csv`` atomically (x,y empty where visibility is 0)."""
+    return write_csv(
+        path,
+        BALL_COLUMNS,
+        [
+            format_ints(track.frame),
+            format_ints(track.visibility),
+            format_floats(track.xy[:, 0], UNIT_DECIMALS),
+            format_floats(track.xy[:, 1], UNIT_DECIMALS),
+        ],
+    )
+
+
+# ------------------------------------------------------------------------------- inactive_balls.csv
+def read_inactive_balls_csv(path: str | Path, *, n_frames: int | None = None) -> InactiveBalls:
+    """Read ``inactive_balls.csv`` (``frame,ball_no,x,y``), sorted by ``(frame, ball_no)``."""
+    table = CsvTable.read(path, INACTIVE_BALLS_COLUMNS)
+    frame = _frames(table, n_frames, unique=False)
+    ball_no = table.ints("ball_no")
+    table.check(
+        ball_no < 0, lambda i: f"negative ball_no {ball_no[i]}", fix="number still balls 0, 1, 2, ..."
+    )
+    table.check(
+        duplicated(np.stack([frame, ball_no], axis=1)),
+        lambda i: f"duplicate (frame, ball_no) = ({frame[i]}, {ball_no[i]})",
+        fix="keep one row per ball and frame",
+    )
+    xy = table.unit_coords(_unit_xy(table), ("x", "y"))
+    order = np.lexsort((ball_no, frame))
+    return InactiveBalls(frame[order], ball_no[order], xy[order])
+
+
+def write_inactive_balls_csv(path: str | Path, balls: InactiveBalls) -> Path:
+    """Write ``balls`` to ``inactive_balls.csv`` atomically."""
+    return write_csv(
+        path,
+        INACTIVE_BALLS_COLUMNS,
+        [
+            format_ints(balls.frame),
+            format_ints(balls.ball_no),
+            format_floats(balls.xy[:, 0], UNIT_DECIMALS),
+            format_floats(balls.xy[:, 1], UNIT_DECIMALS),
+        ],
+    )
+
+
+# --------------------------------------------------------------------------------------- events.csv
+def read_events_csv(path: str | Path, *, n_frames: int | None = None) -> HitEvents:
+    """Read ``events.csv`` (``frame,event``); labels must be from ``EVENT_LABELS``."""
+    table = CsvTable.read(path, EVENTS_COLUMNS)
+    frame = _frames(table, n_frames)
+    event = table.choices("event", EVENT_LABELS)
+    order = np.argsort(frame, kind="stable")
+    return HitEvents(frame[order], event[order])
+
+
+def write_events_csv(path: str | Path, events: HitEvents) -> Path:
+    """Write ``events`` to ``events.csv`` atomically."""
+    return write_csv(path, EVENTS_COLUMNS, [format_ints(events.frame), events.event.tolist()])
+
+
+# --------------------------------------------------------------------------------- court_points.csv
+def read_court_points_csv(path: str | Path, *, known_names: Iterable[str] | None = None) -> CourtPoints:
+    """Read ``court_points.csv`` (``name,x,y``).
+
+    Args:
+        path: the file.
+        known_names: the point names of the court YAML; other names are rejected (with the closest
+            valid name as a hint). None accepts any name.
+    """
+    table = CsvTable.read(path, COURT_POINTS_COLUMNS)
+    names = table.strings("name")
+    table.check(
+        np.array([not n for n in names], dtype=bool), "empty point name", fix="write the court point's name"
+    )
+    table.check(
+        duplicated(np.array(names, dtype=str)),
+        lambda i: f"duplicate point {names[i]!r}",
+        fix="keep one row per court point",
+    )
+    if known_names is not None:
+        _check_known_names(table, names, list(known_names))
+    xy = table.unit_coords(_unit_xy(table), ("x", "y"))
+    return CourtPoints(names, xy)
+
+
+def _check_known_names(table: CsvTable, names: list[str], known: list[str]) -> None:
+    known_set = set(known)
+
+    def problem(i: int) -> str:
+        hint = closest(names[i], known)
+        return f"unknown court point {names[i]!r}" + (f" (did you mean {hint!r}?)" if hint else "")
+
+    table.check(
+        np.array([n not in known_set for n in names], dtype=bool),
+        problem,
+        fix=f"use a point name of the court YAML: {', '.join(known)}",
+    )
+
+
+def write_court_points_csv(path: str | Path, points: CourtPoints) -> Path:
+    """Write ``points`` to ``court_points.csv`` atomically, in their order."""
+    return write_csv(
+        path,
+        COURT_POINTS_COLUMNS,
+        [
+            points.names,
+            format_floats(points.xy[:, 0], UNIT_DECIMALS),
+            format_floats(points.xy[:, 1], UNIT_DECIMALS),
+        ],
+    )
+
+
+# -------------------------------------------------------------------------------------- ball_3d.csv
+def read_ball_3d_csv(path: str | Path, *, n_frames: int | None = None) -> Ball3D:
+    """Read ``ball_3d.csv`` (``frame,x_m,y_m,z_m,segment,kind[,sigma_m]`` plus any extra columns).
+
+    Extra columns are kept as text in :attr:`Ball3D.extra` and written back unchanged.
+    """
+    table = CsvTable.read(path, BALL_3D_COLUMNS[:-1], optional=BALL_3D_COLUMNS[-1:])
+    frame = _frames(table, n_frames, unique=False)
+    kind = table.choices("kind", BALL3D_KINDS)
+    table.check(
+        duplicated(np.stack([frame, np.searchsorted(np.sort(BALL3D_KINDS), kind)], axis=1)),
+        lambda i: f"duplicate (frame, kind) = ({frame[i]}, {kind[i]})",
+        fix="keep one row per frame and kind",
+    )
+    xyz = np.stack([table.floats(c) for c in ("x_m", "y_m", "z_m")], axis=1).reshape(len(table), 3)
+    segment = table.ints("segment")
+    sigma = table.floats("sigma_m", allow_empty=True) if table.has("sigma_m") else np.full(len(table), np.nan)
+    table.check(
+        sigma < 0, lambda i: f"negative sigma_m {sigma[i]}", fix="sigma_m is a standard deviation >= 0"
+    )
+    extra = {c: np.array(table.strings(c), dtype=str) for c in table.header if c not in BALL_3D_COLUMNS}
+    order = np.argsort(frame, kind="stable")
+    return Ball3D(
+        frame[order],
+        xyz[order],
+        segment[order],
+        kind[order],
+        sigma[order],
+        {c: v[order] for c, v in extra.items()},
+    )
+
+
+def write_ball_3d_csv(path: str | Path, ball: Ball3D) -> Path:
+    """Write ``ball`` to ``ball_3d.csv`` atomically, extra columns last."""
+    columns = [
+        format_ints(ball.frame),
+        *(format_floats(ball.xyz[:, j], METRE_DECIMALS) for j in range(3)),
+        format_ints(ball.segment),
+        ball.kind.tolist(),
+        format_floats(ball.sigma, METRE_DECIMALS),
+        *(_format_any(v) for v in ball.extra.values()),
+    ]
+    return write_csv(path, [*BALL_3D_COLUMNS, *ball.extra], columns)
+
+
+def _format_any(values: np.ndarray) -> list[str]:
+    if values.dtype.kind == "f":
+        return ["" if v != v else repr(v) for v in values.tolist()]
+    return [str(v) for v in values.tolist()]

@@ -1,0 +1,357 @@
+"""Lazy frame access for a clip: a video file or a ``frames/`` folder of ``000000.jpg`` ...
+
+Nothing loads a whole video: :meth:`FrameSource.read` decodes one frame (seeking only when the frame
+is not the next one, with a small LRU cache), and :meth:`FrameSource.iter` decodes sequentially.
+Frames are RGB ``uint8 (H, W, 3)``.
+
+Example::
+
+    with FrameSource.open("clips/rally_001") as src:
+        first = src[0]
+        for frame in src.iter(start=100, stop=200):
+            ...
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from abc import ABC, abstractmethod
+from collections import OrderedDict
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .errors import FormatError
+
+FRAME_NAME = re.compile(r"^(\d+)\.(jpg|jpeg|png)$", re.IGNORECASE)
+VIDEO_FIX = (
+    "re-encode the video (e.g. ffmpeg -i in.mp4 -c:v libx264 -pix_fmt yuv420p video.mp4) or extract frames/"
+)
+MAX_GRAB_AHEAD = 32
+"""Decode forward instead of seeking when the wanted frame is at most this far ahead."""
+
+
+class FrameSource(ABC):
+    """Random and sequential access to the frames of one clip. Use :meth:`open`.
+
+    Attributes:
+        path: the video file or frames folder.
+        fps: frames per second (None for a frames folder opened without one).
+        width, height: image size in pixels.
+    """
+
+    path: Path
+    fps: float | None
+    width: int
+    height: int
+
+    def __init__(self, cache_size: int = 8):
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._cache_size = cache_size
+
+    @staticmethod
+    def open(path: str | Path, *, fps: float | None = None, cache_size: int = 8) -> FrameSource:
+        """Open a clip folder (its ``clip.yaml`` names the frames), a video file, or a frames folder.
+
+        Args:
+            path: clip folder, video file or frames folder.
+            fps: overrides the frame rate (a clip folder's ``clip.yaml`` gives it otherwise).
+            cache_size: number of recently read frames kept in memory.
+        """
+        path = Path(path)
+        if path.is_dir() and (path / "clip.yaml").is_file():
+            from .clip_yaml import read_clip_yaml
+
+            info = read_clip_yaml(path / "clip.yaml")
+            return FrameSource.open(path / info.video, fps=fps or info.fps, cache_size=cache_size)
+        if path.is_dir():
+            return FolderFrames(path, fps=fps, cache_size=cache_size)
+        if not path.exists():
+            raise FormatError(
+                path,
+                "video file not found",
+                fix="check the path, or clip.yaml's 'video' key (a file like video.mp4 or frames/)",
+            )
+        return VideoFrames(path, fps=fps, cache_size=cache_size)
+
+    # --------------------------------------------------------------------------------------- access
+    @abstractmethod
+    def __len__(self) -> int: ...
+
+    def __getitem__(self, index: int) -> np.ndarray:
+        return self.read(index)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return self.iter()
+
+    def __enter__(self) -> FrameSource:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release the decoder (the source reopens it if used again)."""
+        self._cache.clear()
+
+    def read(self, index: int) -> np.ndarray:
+        """Frame ``index`` (negative counts from the end) as RGB ``uint8 (H, W, 3)``.
+
+        The array is cached and read-only: copy it before drawing on it.
+        """
+        index = self._check_index(index)
+        frame = self._cache.get(index)
+        if frame is None:
+            return self._remember(index, self._decode(index))
+        self._cache.move_to_end(index)
+        return frame
+
+    def _remember(self, index: int, frame: np.ndarray) -> np.ndarray:
+        frame.flags.writeable = False
+        self._cache[index] = frame
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return frame
+
+    def iter(self, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        """Frames ``start .. stop-1`` in order, decoded sequentially (``stop`` None = to the end)."""
+        n = len(self)
+        stop = n if stop is None else min(stop, n)
+        if start < 0 or start > n:
+            raise IndexError(f"start {start} is outside 0..{n}")
+        return self._iter(start, stop) if start < stop else iter(())
+
+    def _check_index(self, index: int) -> int:
+        n = len(self)
+        if not isinstance(index, int | np.integer):
+            raise TypeError(f"frame index must be an integer, got {type(index).__name__}")
+        i = int(index) + (n if index < 0 else 0)
+        if not 0 <= i < n:
+            raise IndexError(f"frame {index} out of range: valid frames are 0..{n - 1} (or -{n}..-1)")
+        return i
+
+    @abstractmethod
+    def _decode(self, index: int) -> np.ndarray:
+        """Decode frame ``index`` (already range-checked)."""
+
+    @abstractmethod
+    def _iter(self, start: int, stop: int) -> Iterator[np.ndarray]:
+        """Decode frames ``start .. stop-1`` sequentially."""
+
+
+# -------------------------------------------------------------------------------------------- video
+class VideoFrames(FrameSource):
+    """Frames of a video file, decoded with OpenCV."""
+
+    def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
+        super().__init__(cache_size)
+        self.path = Path(path)
+        self._cap: cv2.VideoCapture | None = None
+        self._next = 0  # the frame the open capture will return next
+        cap = self._capture()
+        self.fps = fps or (cap.get(cv2.CAP_PROP_FPS) or None)
+        self._n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        first = self._remember(0, self._read_next(0))
+        if self._n <= 0:
+            self._n = self._count_frames()
+        self.height, self.width = first.shape[:2]
+
+    def __len__(self) -> int:
+        return self._n
+
+    def close(self) -> None:
+        super().close()
+        self._release()
+
+    def _release(self) -> None:
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+
+    def _open(self) -> cv2.VideoCapture:
+        cap = cv2.VideoCapture(str(self.path))
+        if not cap.isOpened():
+            raise FormatError(
+                self.path, "cannot open the video (corrupt or unsupported format)", fix=VIDEO_FIX
+            )
+        return cap
+
+    def _capture(self) -> cv2.VideoCapture:
+        if self._cap is None:
+            self._cap = self._open()
+            self._next = 0
+        return self._cap
+
+    def _decode_error(self, index: int) -> FormatError:
+        self._release()
+        problem = f"cannot decode frame {index} (the video reports {self._n} frames)"
+        return FormatError(self.path, problem, fix=VIDEO_FIX)
+
+    def _read_next(self, index: int) -> np.ndarray:
+        ok, bgr = self._capture().read()
+        if not ok or bgr is None:
+            raise self._decode_error(index)
+        self._next = index + 1
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+    def _decode(self, index: int) -> np.ndarray:
+        cap = self._capture()
+        if not self._next <= index <= self._next + MAX_GRAB_AHEAD:
+            cap = self._cap = self._seek(cap, index)
+            self._next = index
+        while self._next < index:  # a few frames ahead: decoding forward is cheaper than seeking
+            if not cap.grab():
+                raise self._decode_error(index)
+            self._next += 1
+        return self._read_next(index)
+
+    def _seek(self, cap: cv2.VideoCapture, index: int) -> cv2.VideoCapture:
+        """Position ``cap`` at ``index``; if its seek is inexact, decode forward from a fresh capture."""
+        cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+        if int(cap.get(cv2.CAP_PROP_POS_FRAMES)) == index:
+            return cap
+        cap.release()
+        cap = self._open()
+        for _ in range(index):
+            if not cap.grab():
+                raise self._decode_error(index)
+        return cap
+
+    def _count_frames(self) -> int:
+        cap, n = self._open(), 0
+        while cap.grab():
+            n += 1
+        cap.release()
+        return n
+
+    def _iter(self, start: int, stop: int) -> Iterator[np.ndarray]:
+        cap = self._open()  # its own decoder, so random access during the loop does not disturb it
+        try:
+            if start:
+                cap = self._seek(cap, start)
+            for index in range(start, stop):
+                ok, bgr = cap.read()
+                if not ok:
+                    raise FormatError(
+                        self.path,
+                        f"the video ends at frame {index} but reports {self._n} frames",
+                        fix=VIDEO_FIX,
+                    )
+                yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        finally:
+            cap.release()
+
+
+# ------------------------------------------------------------------------------------ frames folder
+class FolderFrames(FrameSource):
+    """Frames stored as images ``000000.jpg, 000001.jpg, ...`` (zero-based, no gaps)."""
+
+    def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
+        super().__init__(cache_size)
+        self.path = Path(path)
+        self.fps = fps
+        self._files = _frame_files(self.path)
+        first = self._remember(0, self._decode(0))
+        self.height, self.width = first.shape[:2]
+
+    def __len__(self) -> int:
+        return len(self._files)
+
+    def _decode(self, index: int) -> np.ndarray:
+        file = self._files[index]
+        bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise FormatError(
+                file, "cannot decode the image", fix="replace the file with a valid JPEG or PNG"
+            )
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+    def _iter(self, start: int, stop: int) -> Iterator[np.ndarray]:
+        for index in range(start, stop):
+            yield self._decode(index)
+
+
+def _frame_files(folder: Path) -> list[Path]:
+    numbered = sorted(
+        (int(m.group(1)), folder / name) for name in os.listdir(folder) if (m := FRAME_NAME.match(name))
+    )
+    if not numbered:
+        raise FormatError(
+            folder, "no frame images found", fix="name frames 000000.jpg, 000001.jpg, ... (zero-based)"
+        )
+    for expected, (index, file) in enumerate(numbered):
+        if index != expected:
+            problem = (
+                f"duplicate frame number {index} ({file.name})"
+                if index < expected
+                else f"frame {expected} is missing (next is {file.name})"
+            )
+            raise FormatError(folder, problem, fix="frames must be numbered 0, 1, 2, ... without gaps")
+    return [file for _, file in numbered]
+
+
+# ------------------------------------------------------------------------------------------ writers
+def _check_frame(frame: np.ndarray, shape: tuple[int, ...] | None, index: int) -> np.ndarray:
+    frame = np.asarray(frame)
+    if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3:
+        raise ValueError(f"frame {index} must be RGB uint8 (H, W, 3), got {frame.dtype} {frame.shape}")
+    if shape is not None and frame.shape != shape:
+        raise ValueError(f"frame {index} has shape {frame.shape}, but the first frame has {shape}")
+    return frame
+
+
+def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float, *, fourcc: str = "mp4v") -> int:
+    """Stream RGB ``uint8 (H, W, 3)`` frames into a video file (OpenCV, ``mp4v`` by default).
+
+    The file appears atomically when all frames are written. Returns the number of frames.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    writer, shape, count = None, None, 0
+    try:
+        for count, frame in enumerate(frames):
+            frame = _check_frame(frame, shape, count)
+            if writer is None:
+                shape = frame.shape
+                writer = cv2.VideoWriter(
+                    str(tmp), cv2.VideoWriter_fourcc(*fourcc), float(fps), (shape[1], shape[0])
+                )
+                if not writer.isOpened():
+                    raise OSError(f"OpenCV cannot write {fourcc!r} video to {path}")
+            writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        if writer is None:
+            raise ValueError("no frames to write")
+        writer.release()
+        writer = None
+        os.replace(tmp, path)
+    finally:
+        if writer is not None:
+            writer.release()
+        tmp.unlink(missing_ok=True)
+    return count + 1
+
+
+def write_frames_folder(folder: str | Path, frames: Iterable[np.ndarray], *, quality: int = 95) -> int:
+    """Write RGB frames as ``000000.jpg, 000001.jpg, ...`` into ``folder``; returns the count.
+
+    Numbered images left over from an older, longer sequence are removed.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    shape, count = None, 0
+    for count, frame in enumerate(frames):
+        frame = _check_frame(frame, shape, count)
+        shape = frame.shape
+        bgr = cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)
+        if not cv2.imwrite(str(folder / f"{count:06d}.jpg"), bgr, [cv2.IMWRITE_JPEG_QUALITY, quality]):
+            raise OSError(f"cannot write {folder / f'{count:06d}.jpg'}")
+    written = count + 1 if shape is not None else 0
+    for name in os.listdir(folder):
+        m = FRAME_NAME.match(name)
+        if m and (int(m.group(1)) >= written or not name.endswith(".jpg") or len(m.group(1)) != 6):
+            os.unlink(folder / name)
+    return written
