@@ -1,6 +1,5 @@
 """Round trips and rejected inputs of the clip CSV files (inference.clipio.csvfiles)."""
 
-import time
 
 import numpy as np
 import pytest
@@ -265,16 +264,15 @@ def test_not_utf8(tmp_path):
         read_events_csv(path)
 
 
-def test_reads_100k_rows_fast(tmp_path):
+def test_reads_100k_rows(tmp_path):
+    """Large files round-trip (speed is measured by bench/bench_clipio.py, not asserted here)."""
     n = 100_000
     vis = rng.integers(0, 4, n)
     t = BallTrack(np.arange(n), vis, np.where((vis > 0)[:, None], rng.random((n, 2)), NAN))
     path = write_ball_csv(tmp_path / "ball.csv", t)
-    start = time.perf_counter()
     back = read_ball_csv(path, n_frames=n)
-    elapsed = time.perf_counter() - start
     assert len(back) == n
-    assert elapsed < 3.0, f"reading 100k rows took {elapsed:.2f}s"
+    np.testing.assert_allclose(back.xy, t.xy, atol=5e-8)
 
 
 @pytest.mark.parametrize("name", SAMPLES)

@@ -1,0 +1,108 @@
+"""The rally3d command: discovery of subcommands, --help on each, calibrate/check/courts on real clips."""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inference.camera import Camera
+from inference.cli import main
+
+SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample" / "padel_sample"
+
+
+@pytest.fixture
+def sample(tmp_path) -> Path:
+    dst = tmp_path / "padel_sample"
+    shutil.copytree(SAMPLE, dst)
+    return dst
+
+
+def test_subcommands_are_discovered_from_entry_points(capsys):
+    assert main([]) == 0
+    out = capsys.readouterr().out
+    for cmd in ("calibrate", "check", "courts"):
+        assert cmd in out
+
+
+@pytest.mark.parametrize("cmd", ["calibrate", "check", "courts"])
+def test_help_on_each_subcommand(cmd, capsys):
+    with pytest.raises(SystemExit) as e:
+        main([cmd, "--help"])
+    assert e.value.code == 0
+    assert f"rally3d {cmd}" in capsys.readouterr().out
+
+
+def test_console_script_runs():
+    exe = Path(sys.executable).with_name("rally3d")
+    if not exe.exists():
+        pytest.skip("console script not installed (run make test)")
+    out = subprocess.run([str(exe), "courts"], capture_output=True, text=True, check=True).stdout
+    assert "padel" in out and "tennis" in out
+
+
+def test_calibrate_writes_camera_close_to_ground_truth(sample, capsys):
+    assert main(["calibrate", str(sample)]) == 0
+    out = capsys.readouterr().out
+    assert "RMS" in out and "net_post_left_top" in out and "camera centre error" in out
+    cam = Camera.load(sample / "camera.yaml")
+    gt = Camera.load(sample / "gt" / "camera.yaml")
+    assert np.linalg.norm(cam.centre - gt.centre) < 0.1
+    assert cam.rms_px < 1.5
+    names = [ln.split(",")[0] for ln in (sample / "court_points.csv").read_text().splitlines()[1:]]
+    assert sorted(cam.residuals_px) == sorted(names)
+
+
+def test_calibrate_dry_run_writes_nothing(sample, capsys):
+    assert main(["calibrate", str(sample), "--dry-run"]) == 0
+    assert not (sample / "camera.yaml").exists()
+
+
+def test_calibrate_coplanar_points_say_what_to_click(sample, capsys):
+    lines = (sample / "court_points.csv").read_text().splitlines()
+    ground = [lines[0]] + [ln for ln in lines[1:] if ln.split(",")[0] in {
+        "far_left", "far_right", "near_service_left", "near_service_right", "far_service_center",
+        "net_left", "net_right", "net_center"}]
+    (sample / "court_points.csv").write_text("\n".join(ground) + "\n")
+    assert main(["calibrate", str(sample)]) == 1
+    err = capsys.readouterr().err
+    assert "all lie on one plane" in err and "net_post_left_top" in err
+    assert not (sample / "camera.yaml").exists()
+
+
+def test_calibrate_unknown_point_name_names_file_and_line(sample, capsys):
+    path = sample / "court_points.csv"
+    path.write_text(path.read_text() + "net_top_middle,0.5,0.5\n")
+    assert main(["calibrate", str(sample)]) == 1
+    err = capsys.readouterr().err
+    n_lines = len(path.read_text().splitlines())
+    assert "court_points.csv" in err and f"line {n_lines}" in err and "net_center_top" in err
+
+
+def test_check_reports_bad_file_with_line(sample, capsys):
+    (sample / "ball.csv").write_text("frame,visibility,x,y\n0,1,0.5,0.5\n1,1,1.7,0.5\n")
+    assert main(["check", str(sample)]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL" in out and "ball.csv, line 3" in out
+    assert "ok   events.csv" in out
+
+
+def test_check_frame_beyond_video(sample, capsys):
+    (sample / "events.csv").write_text("frame,event\n5,ground\n600,net\n")
+    assert main(["check", str(sample)]) == 1
+    assert "events.csv, line 3" in capsys.readouterr().out
+
+
+def test_courts_lists_points(capsys):
+    assert main(["courts", "padel"]) == 0
+    out = capsys.readouterr().out
+    assert "glass_near_left_top" in out and "wall_left" in out
+
+
+def test_missing_clip_is_a_clear_error(tmp_path, capsys):
+    assert main(["calibrate", str(tmp_path / "nope")]) == 1
+    assert "clip.yaml" in capsys.readouterr().err
