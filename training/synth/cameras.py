@@ -1,0 +1,114 @@
+"""Cameras for synthetic clips: presets for the common views and their randomisation.
+
+Presets:
+    ``padel_installed`` — the usual fixed padel camera, behind and above the near back glass.
+    ``tennis_broadcast`` — the broadcast view from high behind the near baseline.
+
+Example:
+    >>> spec = CameraSpec.preset("padel_installed").randomised(np.random.default_rng(0))
+    >>> cam = spec.build(load_court("padel"))       # an inference.camera.Camera, fov fitted to the court
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from inference.camera import Camera, rotation_look_at
+from inference.court import Court
+
+FPS_CHOICES = (25.0, 30.0, 50.0, 60.0)
+RESOLUTIONS = ((1280, 720), (1920, 1080), (960, 540))
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """A camera to render with.
+
+    Attributes:
+        width, height: image size in pixels; fps: frame rate.
+        eye: (3,) camera centre in court metres; target: (3,) the point it looks at.
+        fov_deg: horizontal field of view; None fits it so the court fills the image with ``margin``.
+        roll_deg: rotation about the optical axis.
+        dist: OpenCV ``(k1, k2, p1, p2, k3)`` lens distortion, or None.
+        margin: fraction of the image kept free around the court when ``fov_deg`` is None.
+        near_y: the fitted view keeps the floor from this y (m) on; installed padel cameras right behind
+            the glass usually cut the near corners.
+    """
+
+    width: int = 1280
+    height: int = 720
+    fps: float = 30.0
+    eye: tuple[float, float, float] = (5.0, -3.0, 6.0)
+    target: tuple[float, float, float] = (5.0, 9.0, 0.0)
+    fov_deg: float | None = None
+    roll_deg: float = 0.0
+    dist: tuple[float, ...] | None = None
+    margin: float = 0.04
+    near_y: float = 0.0
+
+    @staticmethod
+    def preset(name: str) -> CameraSpec:
+        """A named preset (see the module docstring)."""
+        presets = {
+            "padel_installed": CameraSpec(eye=(5.0, -3.0, 6.0), target=(5.0, 9.0, 0.0), near_y=2.0),
+            "tennis_broadcast": CameraSpec(eye=(5.485, -14.0, 9.0), target=(5.485, 10.5, 0.0), margin=0.08),
+        }
+        if name not in presets:
+            raise KeyError(f"unknown camera preset {name!r}; presets: {sorted(presets)}")
+        return presets[name]
+
+    def randomised(self, rng: np.random.Generator, jitter_m: float = 0.6, distortion: bool = True) -> CameraSpec:
+        """A random variation: position/aim jitter, roll, resolution, fps and mild lens distortion."""
+        eye = np.asarray(self.eye) + rng.uniform(-1, 1, 3) * np.array([jitter_m * 1.5, jitter_m, jitter_m])
+        target = np.asarray(self.target) + rng.uniform(-1, 1, 3) * np.array([0.5, 1.0, 0.0]) * jitter_m
+        width, height = RESOLUTIONS[rng.integers(len(RESOLUTIONS))]
+        dist = None
+        if distortion and rng.random() < 0.5:
+            dist = (float(rng.uniform(-0.18, 0.03)), float(rng.uniform(-0.02, 0.04)), 0.0, 0.0, 0.0)
+        return replace(self, eye=tuple(eye), target=tuple(target), width=int(width), height=int(height),
+                       fps=float(FPS_CHOICES[rng.integers(len(FPS_CHOICES))]),
+                       roll_deg=float(rng.uniform(-2.0, 2.0)), dist=dist,
+                       margin=float(rng.uniform(0.02, 0.10)))
+
+    def rotation(self) -> np.ndarray:
+        """World→camera rotation including roll."""
+        R = rotation_look_at(np.asarray(self.eye, float), np.asarray(self.target, float))
+        a = np.radians(self.roll_deg)
+        roll = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
+        return roll @ R
+
+    def build(self, court: Court) -> Camera:
+        """The :class:`Camera`; with ``fov_deg`` None the focal length is fitted to the court."""
+        R = self.rotation()
+        eye = np.asarray(self.eye, dtype=float)
+        t = -R @ eye
+        w, h = self.width, self.height
+        if self.fov_deg is not None:
+            f = 0.5 * w / np.tan(np.radians(self.fov_deg) / 2)
+        else:
+            f = fit_focal(court, R, t, (w, h), self.margin, self.near_y)
+        K = np.array([[f, 0, w / 2], [0, f, h / 2], [0, 0, 1.0]])
+        return Camera.from_krt(K, R, t, (w, h), dist=self.dist, source="ground_truth")
+
+
+def court_extent_points(court: Court, near_y: float = 0.0) -> np.ndarray:
+    """(M, 3) points that should be in view: the floor from ``near_y`` on and the far wall tops."""
+    sx, sy = court.size
+    pts = [[0, near_y, 0], [sx, near_y, 0], [0, sy, 0], [sx, sy, 0]]
+    far_tops = [p for n, p in court.points.items() if p[1] >= sy - 1e-6 and p[2] > 0]
+    return np.array(pts + [list(p) for p in far_tops], dtype=float)
+
+
+def fit_focal(court: Court, R: np.ndarray, t: np.ndarray, size: tuple[int, int], margin: float,
+              near_y: float = 0.0) -> float:
+    """The largest focal length (px) that keeps the court's extent points inside the image margins."""
+    w, h = size
+    Xc = court_extent_points(court, near_y) @ R.T + t
+    if np.any(Xc[:, 2] <= 0.1):
+        raise ValueError("the court is behind the camera: check eye/target")
+    xn, yn = Xc[:, 0] / Xc[:, 2], Xc[:, 1] / Xc[:, 2]
+    half_w, half_h = (0.5 - margin) * w, (0.5 - margin) * h
+    fx = half_w / max(np.abs(xn).max(), 1e-9)
+    fy = half_h / max(np.abs(yn).max(), 1e-9)
+    return float(min(fx, fy))
