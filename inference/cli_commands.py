@@ -11,11 +11,7 @@ def _clip_court(clip):
     """The court of a clip: clip.yaml's ``court`` path, else ``conf/court/<sport>.yaml``."""
     from inference.court import load_court
 
-    info = clip.info
-    court = info.court or info.sport
-    if info.court and not Path(court).is_absolute():
-        court = str(clip.root / court)
-    return load_court(court)
+    return load_court(clip.court_path())
 
 
 # --- rally3d calibrate ---------------------------------------------------------------------------------
@@ -123,6 +119,11 @@ def run_check(args: argparse.Namespace) -> int:
             "court_points.csv": lambda: clip.read_court_points(known_names=court.point_names),
             "camera.yaml": clip.read_camera,
             "ball_3d.csv": lambda: clip.read_ball_3d(n_frames=n_frames),
+            "players.csv": lambda: clip.read_players(n_frames=n_frames),
+            "gt/camera.yaml": lambda: clip.read_camera(gt=True),
+            "gt/ball_3d.csv": lambda: clip.read_ball_3d(gt=True, n_frames=n_frames),
+            "gt/events.csv": lambda: clip.read_events(gt=True, n_frames=n_frames),
+            "gt/players.csv": lambda: clip.read_players(gt=True, n_frames=n_frames),
         }
         print(f"{root}: {info.sport}, {info.width}x{info.height} @ {info.fps:g} fps, {n_frames} frames")
         for name, read in checks.items():

@@ -21,6 +21,7 @@ from .csvfiles import (
 )
 from .errors import FormatError
 from .frames import FolderFrames, FrameSource, VideoFrames, write_frames_folder, write_video
+from .players import PlayerTracks, read_players_csv, write_players_csv
 from .importers import (
     PADEL_6CLASS_CODES,
     export_tracknet_label,
@@ -58,6 +59,7 @@ __all__ = [
     "FrameSource",
     "HitEvents",
     "InactiveBalls",
+    "PlayerTracks",
     "VideoFrames",
     "atomic_write_bytes",
     "atomic_write_text",
@@ -75,6 +77,7 @@ __all__ = [
     "read_court_points_csv",
     "read_events_csv",
     "read_inactive_balls_csv",
+    "read_players_csv",
     "write_ball_3d_csv",
     "write_ball_csv",
     "write_clip_yaml",
@@ -82,5 +85,6 @@ __all__ = [
     "write_events_csv",
     "write_frames_folder",
     "write_inactive_balls_csv",
+    "write_players_csv",
     "write_video",
 ]

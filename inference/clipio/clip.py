@@ -11,6 +11,7 @@ from . import csvfiles
 from .clip_yaml import ClipInfo, read_clip_yaml, write_clip_yaml
 from .errors import FormatError
 from .frames import FrameSource
+from .players import PlayerTracks, read_players_csv, write_players_csv
 from .tables import Ball3D, BallTrack, CourtPoints, HitEvents, InactiveBalls
 
 if TYPE_CHECKING:
@@ -18,7 +19,6 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 
-DEFAULT_COURT_DIR = Path(__file__).resolve().parents[2] / "conf" / "court"
 
 
 class Clip:
@@ -104,7 +104,11 @@ class Clip:
         """
         if self.info.court:
             return self.root / self.info.court
-        return Path(court_dir or DEFAULT_COURT_DIR) / f"{self.info.sport}.yaml"
+        if court_dir is None:
+            from inference.court import CONF_DIR
+
+            court_dir = CONF_DIR / "court"
+        return Path(court_dir) / f"{self.info.sport}.yaml"
 
     # ---------------------------------------------------------------------------- clip.yaml, frames
     @cached_property
@@ -213,6 +217,21 @@ class Clip:
 
     def write_ball_3d(self, ball: Ball3D, *, gt: bool = False) -> Path:
         return csvfiles.write_ball_3d_csv(self._path("ball_3d.csv", gt), ball)
+
+    def read_players(
+        self, *, gt: bool = False, missing_ok: bool = False, n_frames: int | None = None
+    ) -> PlayerTracks:
+        """``players.csv`` (or ``gt/players.csv``)."""
+        return self._read(
+            self._path("players.csv", gt),
+            read_players_csv,
+            PlayerTracks.empty,
+            missing_ok,
+            n_frames=self._frame_limit(n_frames),
+        )
+
+    def write_players(self, players: PlayerTracks, *, gt: bool = False) -> Path:
+        return write_players_csv(self._path("players.csv", gt), players)
 
     # --------------------------------------------------------------------------------------- camera
     def read_camera(self, *, gt: bool = False) -> Camera:
