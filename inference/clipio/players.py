@@ -133,11 +133,11 @@ def write_players_csv(path: str | Path, players: PlayerTracks) -> Path:
                format_floats(p.score[order], 4)]
     columns += [format_floats(p.bbox[order, k], 7) for k in range(4)]
     columns += [format_floats(p.court_xy[order, k], 5) for k in range(2)]
-    kp = p.keypoints[order].reshape(len(p), -1)
+    kp = p.keypoints[order].reshape(len(p), 3 * J)
     columns += [format_floats(kp[:, k], 7 if k % 3 < 2 else 4) for k in range(kp.shape[1])]
     header = list(BASE_COLUMNS + KP_COLUMNS)
     if p.has_3d:
-        j3 = p.joints_3d[order].reshape(len(p), -1)
+        j3 = p.joints_3d[order].reshape(len(p), 3 * J)
         columns += [format_floats(j3[:, k], 5) for k in range(j3.shape[1])]
         header += list(KP3D_COLUMNS)
     return write_csv(path, header, columns)
