@@ -303,36 +303,81 @@ def _check_frame(frame: np.ndarray, shape: tuple[int, ...] | None, index: int) -
     return frame
 
 
-def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float, *, fourcc: str = "mp4v") -> int:
-    """Stream RGB ``uint8 (H, W, 3)`` frames into a video file (OpenCV, ``mp4v`` by default).
+def write_video(
+    path: str | Path, frames: Iterable[np.ndarray], fps: float, *, fourcc: str = "mp4v", crf: int = 23
+) -> int:
+    """Stream RGB ``uint8 (H, W, 3)`` frames into a video file.
+
+    Args:
+        fourcc: ``mp4v`` (MPEG-4 part 2, OpenCV, fast), ``MJPG``, ... or ``h264`` (libx264 through PyAV,
+            ``ultrafast`` preset, since opencv-python-headless cannot encode H.264).
+        crf: H.264 quality (lower is better; 23 is libx264's default).
 
     The file appears atomically when all frames are written. Returns the number of frames.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    writer, shape, count = None, None, 0
+    sink, shape, count = None, None, 0
     try:
         for count, frame in enumerate(frames):
             frame = _check_frame(frame, shape, count)
-            if writer is None:
+            if sink is None:
                 shape = frame.shape
-                writer = cv2.VideoWriter(
-                    str(tmp), cv2.VideoWriter_fourcc(*fourcc), float(fps), (shape[1], shape[0])
-                )
-                if not writer.isOpened():
-                    raise OSError(f"OpenCV cannot write {fourcc!r} video to {path}")
-            writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
-        if writer is None:
+                sink = _H264Sink(tmp, fps, shape, crf) if fourcc.lower() == "h264" else _CvSink(tmp, fourcc, fps, shape)
+            sink.write(frame)
+        if sink is None:
             raise ValueError("no frames to write")
-        writer.release()
-        writer = None
+        sink.close()
+        sink = None
         os.replace(tmp, path)
     finally:
-        if writer is not None:
-            writer.release()
+        if sink is not None:
+            sink.close()
         tmp.unlink(missing_ok=True)
     return count + 1
+
+
+class _CvSink:
+    """OpenCV ``VideoWriter`` for RGB frames."""
+
+    def __init__(self, path: Path, fourcc: str, fps: float, shape: tuple[int, ...]):
+        self.writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), float(fps), (shape[1], shape[0]))
+        if not self.writer.isOpened():
+            raise OSError(f"OpenCV cannot write {fourcc!r} video to {path}")
+
+    def write(self, frame: np.ndarray) -> None:
+        self.writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+
+    def close(self) -> None:
+        self.writer.release()
+
+
+class _H264Sink:
+    """H.264 (libx264, yuv420p) through PyAV for RGB frames."""
+
+    def __init__(self, path: Path, fps: float, shape: tuple[int, ...], crf: int):
+        import fractions
+
+        import av
+
+        self.container = av.open(str(path), "w", format="mp4")
+        rate = fractions.Fraction(fps).limit_denominator(1001)
+        self.stream = self.container.add_stream("libx264", rate=rate)
+        self.stream.width, self.stream.height = shape[1] - shape[1] % 2, shape[0] - shape[0] % 2
+        self.stream.pix_fmt = "yuv420p"
+        self.stream.options = {"preset": "ultrafast", "crf": str(crf)}
+        self.av = av
+
+    def write(self, frame: np.ndarray) -> None:
+        frame = frame[: self.stream.height, : self.stream.width]
+        for packet in self.stream.encode(self.av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")):
+            self.container.mux(packet)
+
+    def close(self) -> None:
+        for packet in self.stream.encode():
+            self.container.mux(packet)
+        self.container.close()
 
 
 def write_frames_folder(folder: str | Path, frames: Iterable[np.ndarray], *, quality: int = 95) -> int:

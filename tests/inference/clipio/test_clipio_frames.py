@@ -211,3 +211,15 @@ def test_write_video_rejects_bad_frames_and_keeps_old_file(tmp_path, frames, mes
         write_video(path, frames, fps=25)
     assert path.read_bytes() == b"old"
     assert [p.name for p in tmp_path.iterdir()] == ["video.mp4"]
+
+
+def test_write_video_h264_random_access(tmp_path):
+    """H.264 written through PyAV reads back with exact random access."""
+    from inference.clipio import FrameSource, write_video
+
+    frames = [np.full((64, 96, 3), 8 * i, np.uint8) for i in range(24)]
+    assert write_video(tmp_path / "v.mp4", frames, 25.0, fourcc="h264", crf=10) == 24
+    src = FrameSource.open(tmp_path / "v.mp4")
+    assert len(src) == 24
+    for i in (17, 3, 22, 0):
+        assert abs(int(src[i].mean()) - 8 * i) <= 3
