@@ -21,6 +21,7 @@ from .csvfiles import (
 )
 from .errors import FormatError
 from .frames import FolderFrames, FrameSource, VideoFrames, write_frames_folder, write_video
+from .manifest import SPLITS, Manifest, ManifestEntry, split_of
 from .players import PlayerTracks, read_players_csv, write_players_csv
 from .importers import (
     PADEL_6CLASS_CODES,
@@ -59,6 +60,9 @@ __all__ = [
     "FrameSource",
     "HitEvents",
     "InactiveBalls",
+    "Manifest",
+    "ManifestEntry",
+    "SPLITS",
     "PlayerTracks",
     "VideoFrames",
     "atomic_write_bytes",
@@ -72,6 +76,7 @@ __all__ = [
     "import_tracknet_badminton",
     "import_tracknet_label",
     "read_ball_3d_csv",
+    "split_of",
     "read_ball_csv",
     "read_clip_yaml",
     "read_court_points_csv",

@@ -1,0 +1,122 @@
+"""Dataset manifests: which clip folders make up a dataset and which split each belongs to.
+
+``manifest.yaml`` sits in the dataset root::
+
+    name: synth_padel
+    sport: padel
+    source: rally3d synth --sport padel --clips 20 --seed 0
+    clips:
+      - {path: clip_0000, split: train}
+      - {path: clip_0001, split: val}
+
+Paths are relative to the manifest's folder. Splits are by clip (or by match: give all clips of a
+match the same split), never by frame, so no rally leaks between training and evaluation.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from .atomic import atomic_write_text
+from .csvtable import read_text
+from .errors import FormatError
+
+SPLITS = ("train", "val", "test")
+
+
+@dataclass(frozen=True)
+class ManifestEntry:
+    """One clip of a dataset: its folder (relative to the manifest) and its split."""
+
+    path: str
+    split: str
+
+    def __post_init__(self) -> None:
+        if self.split not in SPLITS:
+            raise ValueError(f"split must be one of {SPLITS}, got {self.split!r}")
+
+
+@dataclass
+class Manifest:
+    """A dataset: clip folders with their splits.
+
+    Attributes:
+        root: the folder holding manifest.yaml (clip paths are relative to it).
+        clips: the entries, in order.
+        name, sport, source: descriptive fields; extra: other keys, kept on a round trip.
+    """
+
+    root: Path
+    clips: list[ManifestEntry]
+    name: str = ""
+    sport: str = ""
+    source: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def paths(self, split: str | None = None) -> list[Path]:
+        """Absolute clip folders, optionally of one split."""
+        return [self.root / c.path for c in self.clips if split is None or c.split == split]
+
+    def counts(self) -> dict[str, int]:
+        return {s: sum(c.split == s for c in self.clips) for s in SPLITS}
+
+    def save(self, path: str | Path | None = None) -> Path:
+        """Write manifest.yaml atomically (default: ``root/manifest.yaml``)."""
+        path = Path(path) if path else self.root / "manifest.yaml"
+        data = {"name": self.name, "sport": self.sport, "source": self.source, **self.extra,
+                "clips": [{"path": c.path, "split": c.split} for c in self.clips]}
+        return atomic_write_text(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+
+    @classmethod
+    def load(cls, path: str | Path) -> Manifest:
+        """Read a manifest.yaml (or the manifest.yaml inside a dataset folder)."""
+        path = Path(path)
+        if path.is_dir():
+            path = path / "manifest.yaml"
+        try:
+            data = yaml.safe_load(read_text(path))
+        except yaml.YAMLError as e:
+            raise FormatError(path, f"not valid YAML ({e})") from None
+        if not isinstance(data, dict) or not isinstance(data.get("clips"), list):
+            raise FormatError(path, "needs a `clips:` list of {path, split}",
+                              fix="see datasets/README.md for the manifest layout")
+        clips = []
+        for i, c in enumerate(data["clips"]):
+            if not isinstance(c, dict) or "path" not in c:
+                raise FormatError(path, f"clip entry {i} needs a `path`")
+            try:
+                clips.append(ManifestEntry(str(c["path"]), str(c.get("split", "train"))))
+            except ValueError as e:
+                raise FormatError(path, f"clip entry {i} ({c['path']}): {e}") from None
+        missing = [c.path for c in clips if not (path.parent / c.path / "clip.yaml").is_file()]
+        if missing:
+            raise FormatError(path, f"clip folders without clip.yaml: {missing[:5]}",
+                              fix="fix the paths (relative to the manifest) or remove the entries")
+        known = {"name", "sport", "source", "clips"}
+        return cls(path.parent, clips, str(data.get("name", "")), str(data.get("sport", "")),
+                   str(data.get("source", "")), {k: v for k, v in data.items() if k not in known})
+
+    @classmethod
+    def from_folder(cls, root: str | Path, fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
+                    group_key=None) -> Manifest:
+        """A manifest for every clip folder under ``root``, split deterministically by hashing names.
+
+        Args:
+            fractions: train/val/test shares.
+            group_key: maps a clip folder name to its group (e.g. the match); a group stays in one split.
+        """
+        root = Path(root)
+        folders = sorted(p.parent.relative_to(root).as_posix() for p in root.rglob("clip.yaml"))
+        clips = [ManifestEntry(f, split_of(group_key(f) if group_key else f, fractions)) for f in folders]
+        return cls(root, clips, name=root.name)
+
+
+def split_of(key: str, fractions: tuple[float, float, float] = (0.8, 0.1, 0.1)) -> str:
+    """A stable split for ``key``: the same name always lands in the same split."""
+    h = int(hashlib.sha1(key.encode()).hexdigest()[:8], 16) / 0xFFFFFFFF
+    total = sum(fractions)
+    edges = [fractions[0] / total, (fractions[0] + fractions[1]) / total]
+    return SPLITS[0] if h < edges[0] else SPLITS[1] if h < edges[1] else SPLITS[2]
