@@ -1,0 +1,237 @@
+"""Synthetic clips and datasets: simulate a rally, articulate the players, render, write a clip folder.
+
+One seed fixes everything: the camera, the look, the rally, the bodies and the sensor noise each draw
+from their own child stream of ``np.random.SeedSequence(seed)``, so the same seed gives identical files.
+
+Example:
+    >>> clip = generate_clip("out/clip_0000", seed=0, config=SynthConfig(sport="padel"))
+    >>> manifest = generate_dataset("out", n_clips=20, seed=0, config=SynthConfig(sport="padel"))
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from inference.clipio import BallTrack, Clip, ClipInfo, Manifest, ManifestEntry, PlayerTracks, write_video
+from inference.clipio.frames import write_frames_folder
+from inference.court import load_court
+from inference.skeleton import COCO17
+
+from .bodies import PlayerPose, articulate
+from .cameras import CameraSpec
+from .groundtruth import ball_3d_table, court_point_table, event_table, inactive_ball_table
+from .rally import default_config, simulate_rally
+from .render import Appearance, CourtRenderer, FrameInfo, ball_exposure
+from .types import Rally
+
+CODECS = ("h264", "mp4v", "frames")
+DEFAULT_CAMERA = {"padel": "padel_installed", "tennis": "tennis_broadcast"}
+
+
+@dataclass
+class SynthConfig:
+    """What to generate.
+
+    Attributes:
+        sport: ``padel`` or ``tennis`` (the court YAML of that name; or ``court`` gives a path).
+        camera: camera preset (default: the sport's usual view); ``randomise_camera`` jitters it and
+            draws resolution, fps and lens distortion.
+        fps, width, height: fix these instead of drawing them.
+        randomise_look: random surfaces, lighting, players, noise, JPEG; else the clean test look.
+        codec: ``h264`` (PyAV, realistic compression), ``mp4v`` (OpenCV, fast) or ``frames`` (JPEG folder).
+        crf: H.264 quality.
+        click_noise_px: uniform noise on court_points.csv (the true projections are in gt/camera.yaml).
+        max_frames: cut long rallies to this many frames (None: keep all).
+    """
+
+    sport: str = "padel"
+    court: str | None = None
+    camera: str | None = None
+    randomise_camera: bool = True
+    fps: float | None = None
+    width: int | None = None
+    height: int | None = None
+    randomise_look: bool = True
+    codec: str = "h264"
+    crf: int = 23
+    click_noise_px: float = 1.0
+    max_frames: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.codec not in CODECS:
+            raise ValueError(f"codec must be one of {CODECS}, got {self.codec!r}")
+
+
+@dataclass
+class ClipSummary:
+    """What one generated clip holds (one row of the dataset report)."""
+
+    path: str
+    seed: int
+    n_frames: int
+    fps: float
+    size: tuple[int, int]
+    n_events: int
+    outcome: str
+    visibility_counts: dict[int, int] = field(default_factory=dict)
+
+
+def camera_spec(config: SynthConfig, rng: np.random.Generator) -> CameraSpec:
+    spec = CameraSpec.preset(config.camera or DEFAULT_CAMERA.get(config.sport, "padel_installed"))
+    if config.randomise_camera:
+        spec = spec.randomised(rng)
+    over = {k: v for k, v in (("fps", config.fps), ("width", config.width), ("height", config.height)) if v}
+    return replace(spec, **over) if over else spec
+
+
+def ball_track(infos: list[FrameInfo], size: tuple[int, int]) -> BallTrack:
+    """ball.csv from the renderer's per-frame ball info (every frame gets a row: 0 when no ball)."""
+    n = len(infos)
+    vis = np.zeros(n, np.int8)
+    xy = np.full((n, 2), np.nan)
+    for i, info in enumerate(infos):
+        if info.ball is not None and info.ball.visibility > 0:
+            vis[i] = info.ball.visibility
+            xy[i] = np.clip([info.ball.x / size[0], info.ball.y / size[1]], 0.0, 1.0)
+    return BallTrack(np.arange(n), vis, xy)
+
+
+def player_tracks(infos: list[FrameInfo], poses: list[PlayerPose], size: tuple[int, int]) -> PlayerTracks:
+    """gt/players.csv: 2D keypoints (visibility as score: 1 visible, 0.5 hidden, 0 outside), boxes,
+    the pelvis floor position and the 3D joints."""
+    rows = {k: [] for k in ("frame", "pid", "team", "bbox", "kp", "court", "j3d")}
+    wh = np.asarray(size, float)
+    hips = [COCO17.index("left_hip"), COCO17.index("right_hip")]
+    for f, info in enumerate(infos):
+        for p, pose in zip(info.players, poses):
+            rows["frame"].append(f)
+            rows["pid"].append(p.player_id)
+            rows["team"].append(p.team)
+            rows["bbox"].append(np.asarray(p.bbox, float) / np.tile(wh, 2) if p.bbox else np.full(4, np.nan))
+            kp = np.concatenate([p.keypoints / wh, (np.asarray(p.keypoint_vis, float) / 2.0)[:, None]], axis=1)
+            rows["kp"].append(kp)
+            j3d = pose.joints[min(f, pose.n_frames - 1)]
+            rows["j3d"].append(j3d)
+            rows["court"].append(j3d[hips, :2].mean(axis=0))
+    n = len(rows["frame"])
+    return PlayerTracks(np.array(rows["frame"], np.int64), np.array(rows["pid"], np.int64), rows["team"],
+                        np.ones(n), np.array(rows["bbox"]).reshape(n, 4), np.array(rows["kp"]).reshape(n, 17, 3),
+                        np.array(rows["court"]).reshape(n, 2), np.array(rows["j3d"]).reshape(n, 17, 3))
+
+
+def _trim(rally: Rally, max_frames: int | None) -> Rally:
+    if not max_frames or rally.n_frames <= max_frames:
+        return rally
+    t_end = (max_frames - 0.5) / rally.fps
+    return replace(rally, n_frames=max_frames, contacts=[c for c in rally.contacts if c.t < t_end])
+
+
+def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> ClipSummary:
+    """Simulate and render one clip into the folder ``out`` (created; existing files are replaced).
+
+    Args:
+        out: the clip folder.
+        seed: fixes camera, look, rally, bodies and noise.
+        progress: called as ``progress(frames_done, n_frames)`` while rendering.
+    """
+    config = config or SynthConfig()
+    court = load_court(config.court or config.sport)
+    seq = np.random.SeedSequence(seed)
+    r_cam, r_look, r_rally, r_body, r_points = (np.random.default_rng(s) for s in seq.spawn(5))
+    spec = camera_spec(config, r_cam)
+    camera = spec.build(court)
+    look = Appearance.sample(r_look, config.sport) if config.randomise_look else Appearance.plain(config.sport)
+    rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport,
+                                 config=default_config(config.sport)), config.max_frames)
+    poses = [articulate(p, spec.fps, r_body, sport=config.sport) for p in rally.players]
+    renderer = CourtRenderer(court, camera, look, seed=int(seq.generate_state(1)[0]))
+    size = camera.image_size
+
+    clip = Clip.create(out, ClipInfo(
+        sport=config.sport, fps=spec.fps, width=size[0], height=size[1],
+        video="frames/" if config.codec == "frames" else "video.mp4", n_frames=rally.n_frames,
+        camera_id=config.camera or DEFAULT_CAMERA.get(config.sport), split=None,
+        source=f"rally3d synth seed {seed}", licence="CC0-1.0", court=config.court,
+        extra={"synth": {"seed": seed, "outcome": rally.outcome, "camera": _plain(asdict(spec))}},
+    ), exist_ok=True)
+    infos: list[FrameInfo] = []
+
+    def frames():
+        for i in range(rally.n_frames):
+            samples = ball_exposure(rally.ball, i, spec.fps, look.shutter)
+            image, info = renderer.render(i, samples, poses, rally.inactive_balls)
+            infos.append(info)
+            if progress:
+                progress(i + 1, rally.n_frames)
+            yield image
+
+    if config.codec == "frames":
+        write_frames_folder(clip.root / "frames", frames())
+    else:
+        write_video(clip.video_path, frames(), spec.fps, fourcc=config.codec, crf=config.crf)
+    track = ball_track(infos, size)
+    clip.write_ball(track)
+    clip.write_inactive_balls(inactive_ball_table(rally, camera))
+    events = event_table(rally)
+    clip.write_events(events)
+    clip.write_events(events, gt=True)
+    clip.write_court_points(court_point_table(court, camera, r_points, config.click_noise_px))
+    clip.write_camera(camera, gt=True)
+    clip.write_ball_3d(ball_3d_table(rally), gt=True)
+    clip.write_players(player_tracks(infos, poses, size), gt=True)
+    counts = {int(v): int(c) for v, c in zip(*np.unique(track.visibility, return_counts=True))}
+    return ClipSummary(str(clip.root), seed, rally.n_frames, spec.fps, size, len(events), rally.outcome, counts)
+
+
+def _plain(d):
+    """YAML-safe copy of a dataclass dict (tuples → lists, numpy → float)."""
+    if isinstance(d, dict):
+        return {k: _plain(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [_plain(v) for v in d]
+    if isinstance(d, np.generic):
+        return d.item()
+    return d
+
+
+def generate_dataset(out: str | Path, n_clips: int, seed: int = 0, config: SynthConfig | None = None,
+                     fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
+                     progress: Callable[[int, ClipSummary], None] | None = None) -> Manifest:
+    """``n_clips`` clips ``clip_0000 …`` under ``out`` plus ``manifest.yaml`` with train/val/test splits.
+
+    Clip ``k`` uses seed ``seed * 100003 + k``: the dataset is reproducible and its clips independent.
+    Splits are assigned in proportion to ``fractions`` over a seeded permutation, so small datasets
+    still get every split.
+    """
+    config = config or SynthConfig()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    splits = split_assignment(n_clips, fractions, np.random.default_rng(seed))
+    entries = []
+    for k in range(n_clips):
+        name = f"clip_{k:04d}"
+        summary = generate_clip(out / name, seed * 100003 + k, config)
+        clip = Clip(out / name)
+        clip.write_info(replace(clip.info, split=splits[k]))
+        entries.append(ManifestEntry(name, splits[k]))
+        if progress:
+            progress(k + 1, summary)
+    manifest = Manifest(out, entries, name=out.name, sport=config.sport,
+                        source=f"rally3d synth --sport {config.sport} --clips {n_clips} --seed {seed}",
+                        extra={"synth_config": _plain(asdict(config))})
+    manifest.save()
+    return manifest
+
+
+def split_assignment(n: int, fractions: tuple[float, float, float], rng: np.random.Generator) -> list[str]:
+    """``n`` split names in the given proportions (at least one val and test clip once n ≥ 3)."""
+    f = np.asarray(fractions, float) / sum(fractions)
+    n_val = max(int(round(n * f[1])), 1 if n >= 3 and f[1] > 0 else 0)
+    n_test = max(int(round(n * f[2])), 1 if n >= 3 and f[2] > 0 else 0)
+    names = ["val"] * n_val + ["test"] * n_test
+    names = ["train"] * (n - len(names)) + names
+    return [names[i] for i in rng.permutation(n)]
