@@ -289,3 +289,16 @@ def test_failed_write_leaves_previous_file_intact(tmp_path, monkeypatch, name):
         write(path, sample)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == [name], "no temporary file left behind"
+
+
+def test_atomic_writes_get_normal_permissions(tmp_path):
+    import os
+
+    from inference.clipio import atomic_write_text
+
+    old = os.umask(0o022)
+    try:
+        path = atomic_write_text(tmp_path / "x.csv", "a\n")
+    finally:
+        os.umask(old)
+    assert path.stat().st_mode & 0o777 == 0o644
