@@ -10,17 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: COCO-17 keypoint order (the order of every (…, 17, …) array of the generator).
-COCO17 = (
-    "nose", "left_eye", "right_eye", "left_ear", "right_ear",
-    "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
-    "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
-)
-#: Bones to draw between COCO-17 joints.
-COCO17_BONES = (
-    (5, 7), (7, 9), (6, 8), (8, 10), (5, 6), (5, 11), (6, 12), (11, 12),
-    (11, 13), (13, 15), (12, 14), (14, 16), (0, 5), (0, 6),
-)
+from inference.skeleton import COCO17, COCO17_BONES  # noqa: F401  (re-exported for the generator)
 
 
 @dataclass
