@@ -7,12 +7,14 @@ STAMP  := $(VENV)/.rally3d-installed
 DEMO   ?= runs/demo
 SAMPLE := datasets/sample/padel_sample
 
-.PHONY: venv demo test test-all bench clean help
+.PHONY: venv demo test test-all sample bench clean help
 
 help:
 	@echo "make demo   - set up .venv and run rally3d on the embedded sample clip"
 	@echo "make test   - set up .venv and run the test suite (without slow tests)"
 	@echo "make test-all - also the slow tests"
+	@echo "make sample - regenerate the embedded sample datasets/sample (bit for bit)"
+	@echo "make bench  - run the benchmarks in bench/ (prints figures)"
 
 # The venv is rebuilt only when the dependency list changes. torch is installed first, alone, so pip
 # takes the local CPU wheel (a later resolution that admits newer torch would pull the CUDA build).
@@ -36,6 +38,13 @@ demo: venv
 	rm -rf $(DEMO) && mkdir -p $(DEMO) && cp -r $(SAMPLE) $(DEMO)/
 	$(VENV)/bin/rally3d check $(DEMO)/padel_sample
 	$(VENV)/bin/rally3d calibrate $(DEMO)/padel_sample
+
+sample: venv
+	$(PY) -m training.synth.sample datasets/sample
+	$(PY) -m training.synth.contact_sheet datasets/sample/contact_sheet.jpg $(SAMPLE) datasets/sample/tennis_sample
+
+bench: venv
+	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

@@ -51,7 +51,7 @@ class CameraSpec:
     def preset(name: str) -> CameraSpec:
         """A named preset (see the module docstring)."""
         presets = {
-            "padel_installed": CameraSpec(eye=(5.0, -1.0, 6.0), target=(5.0, 9.5, 0.0), near_y=1.0),
+            "padel_installed": CameraSpec(eye=(5.0, -3.0, 6.0), target=(5.0, 9.5, 0.0), near_y=2.5),
             "tennis_broadcast": CameraSpec(eye=(5.485, -14.0, 9.0), target=(5.485, 10.5, 0.0), margin=0.08),
         }
         if name not in presets:

@@ -46,6 +46,14 @@ from training.synth.types import BallPath, InactiveBall
 Colour = tuple[int, int, int]
 UP = np.array([0.0, 0.0, 1.0])
 NEAR = 0.05  # m, near clipping distance
+#: visibility 2 ("hard to see"): a ball under this projected radius (px) ...
+HARD_RADIUS_PX = 1.0
+#: ... or whose colour, diluted by its motion blur, differs from the background by less than this (RGB).
+HARD_CONTRAST = 25.0
+#: a ball behind structure (mesh wires, frame posts, net) this opaque (0–1) at its centre is occluded (3) ...
+HIDDEN_COVER = 0.85
+#: ... or hard to see (2) above this.
+HARD_COVER = 0.5
 SHIFT = 4  # cv2 sub-pixel bits
 ONE = 1 << SHIFT
 #: Drawing order bias (m) per material: clothes win over skin at equal depth.
@@ -1091,21 +1099,42 @@ class CourtRenderer:
             it.paint(img)
 
     def _assign_panels(self, items: list[_Item]) -> None:
-        """Fill each item's ``panels`` (far to near) with the overlays in front of it: the panels whose
-        polygon the line of sight to its anchor crosses, and the frame tubes that overlap its box and come
-        closer to that line of sight than the anchor does."""
+        """Fill each item's ``panels`` (far to near) with the overlays in front of it."""
         if not items or not self.overlays:
             return
-        X = np.array([it.anchor for it in items])
-        front = np.zeros((len(items), len(self.overlays)), bool)
-        for k, overlay in enumerate(self.overlays):
-            if overlay.plane is not None:
-                mirror = np.array([it.exclude == overlay.plane.name for it in items])
-                front[:, k] = self._behind_plane(X, overlay.plane) & ~mirror
-        if self._tubes:
-            front[:, [k for k, _ in self._tubes]] = self._behind_tubes(X, np.array([it.box for it in items]))
+        exclude = [it.exclude for it in items]
+        front = self._front_overlays(np.array([it.anchor for it in items]), np.array([it.box for it in items]),
+                                     exclude)
         for it, row in zip(items, front):
             it.panels = [self.overlays[k] for k in np.flatnonzero(row)]
+
+    def _front_overlays(self, X: np.ndarray, boxes: np.ndarray, exclude: Sequence[str | None] = ()) -> np.ndarray:
+        """(N, 3) anchors with (N, 4) pixel boxes → (N, K) whether overlay k lies in front of anchor n: the
+        panels whose polygon the line of sight crosses (except a plane named in ``exclude[n]``, for mirror
+        images), and the frame tubes that overlap the box and come closer to the line of sight."""
+        front = np.zeros((len(X), len(self.overlays)), bool)
+        for k, overlay in enumerate(self.overlays):
+            if overlay.plane is not None:
+                mirror = np.array([e == overlay.plane.name for e in exclude], bool) if len(exclude) else False
+                front[:, k] = self._behind_plane(X, overlay.plane) & ~mirror
+        if self._tubes:
+            front[:, [k for k, _ in self._tubes]] = self._behind_tubes(X, boxes)
+        return front
+
+    def _structure_cover(self, X: np.ndarray, xy: np.ndarray) -> float:
+        """Opacity (0–1) of the glass, mesh, net and frames between the camera and point ``X`` (3,) at its
+        pixel ``xy`` (2,): 1 - Π(1 - alpha) of the overlays in front of it."""
+        if not self.overlays:
+            return 0.0
+        x, y = int(round(float(xy[0]))), int(round(float(xy[1])))
+        front = self._front_overlays(X[None], np.array([[x - 1, y - 1, x + 2, y + 2]]))[0]
+        clear = 1.0
+        for k in np.flatnonzero(front):
+            o = self.overlays[k]
+            x0, y0, x1, y1 = o.box
+            if x0 <= x < x1 and y0 <= y < y1:
+                clear *= 1.0 - float(o.alpha[y - y0, x - x0])
+        return 1.0 - clear
 
     def _behind_plane(self, X: np.ndarray, plane: Plane) -> np.ndarray:
         """(N, 3) points → (N,) whether the line of sight to each crosses the plane inside its polygon."""
@@ -1382,17 +1411,18 @@ class CourtRenderer:
         hidden = self._hidden_by(mid[None], occluders, self.ball_radius)[0]
         occluder = int(occluders[3][np.argmax(hidden)]) if hidden.any() else None
         peak = min(1.0, 2 * r_px / max(streak, 1e-9))  # the blur spreads the ball: its strongest coverage
+        cover = self._structure_cover(mid, xy) if depth > NEAR and self._in_image(xy) else 0.0
         if depth <= NEAR or not self._in_image(xy):
             vis = 0
-        elif occluder is not None:
+        elif occluder is not None or cover > HIDDEN_COVER:
             vis = 3
-        elif r_px < 1.5 or streak > 8 * r_px or self._low_contrast(xy, peak):
+        elif r_px < HARD_RADIUS_PX or cover > HARD_COVER or self._low_contrast(xy, peak * (1 - cover)):
             vis = 2
         else:
             vis = 1
         return BallInfo(float(xy[0]), float(xy[1]), float(r_px), vis, streak, occluder)
 
-    def _low_contrast(self, xy: np.ndarray, peak: float, threshold: float = 40.0) -> bool:
+    def _low_contrast(self, xy: np.ndarray, peak: float, threshold: float = HARD_CONTRAST) -> bool:
         """Whether the ball's colour, at ``peak`` coverage (< 1 when blur spreads it), differs from the
         background at ``xy`` by less than ``threshold`` (RGB distance)."""
         x, y = round(float(xy[0])), round(float(xy[1]))
