@@ -70,6 +70,23 @@ class BallConstants:
 
 
 @dataclass(frozen=True)
+class HitLimits:
+    """Where a racket hit can happen: height range (m), offset along y from the hitter's court position
+    (m), and the horizontal reach (m) from the hitter."""
+
+    height: tuple[float, float] = (0.0, 2.8)
+    offset_y: tuple[float, float] = (-1.2, 1.2)
+    reach: float = 1.6
+
+    def __post_init__(self) -> None:
+        h, o = tuple(float(v) for v in self.height), tuple(float(v) for v in self.offset_y)
+        if len(h) != 2 or h[0] > h[1] or len(o) != 2 or o[0] > o[1] or self.reach <= 0:
+            raise ValueError("hits: height and offset_y must be [low, high] with low <= high, reach > 0")
+        object.__setattr__(self, "height", h)
+        object.__setattr__(self, "offset_y", o)
+
+
+@dataclass(frozen=True)
 class Plane:
     """A planar surface patch of the court that the ball can touch.
 
@@ -172,6 +189,8 @@ class Court:
         materials: material name → bounce constants.
         lines: drawing layer (``paint``, ``net``, ``glass``, ``mesh``) → (L, 2, 3) segments.
         ball: the ball's physical constants.
+        hits: where racket hits can happen (for the reconstruction).
+        event_groups: coarse class name → the fine-grained surface labels it stands for.
         source: the YAML file it came from.
     """
 
@@ -184,6 +203,8 @@ class Court:
     materials: dict[str, Material]
     lines: dict[str, np.ndarray]
     ball: BallConstants
+    hits: HitLimits = field(default_factory=HitLimits)
+    event_groups: dict[str, tuple[str, ...]] = field(default_factory=dict)
     source: Path | None = None
     extra: dict = field(default_factory=dict)
 
@@ -216,8 +237,10 @@ class Court:
         raise KeyError(f"court {self.name} has no plane {name!r}; planes: {[p.name for p in self.planes]}")
 
     def planes_for(self, events: str | Iterable[str]) -> list[Plane]:
-        """The planes whose event label is ``events`` (one label or a group of labels)."""
+        """The planes of an event label, of a group name of :attr:`event_groups`, or of several labels."""
         wanted = {events} if isinstance(events, str) else set(events)
+        for group in wanted & set(self.event_groups):
+            wanted |= set(self.event_groups[group])
         return [p for p in self.planes if p.event in wanted]
 
     @property
@@ -290,6 +313,8 @@ def load_court(name_or_path: str | Path) -> Court:
                 raise ValueError(f"lines.{layer} must be a list of [[x,y,z],[x,y,z]] segments")
             lines[str(layer)] = arr
         ball = BallConstants(**data["ball"])
+        hits = HitLimits(**(data.get("hits") or {}))
+        groups = {str(k): tuple(str(x) for x in v) for k, v in (data.get("event_groups") or {}).items()}
         size = np.asarray(data.get("size", [0, 0]), dtype=float)
         return Court(
             name=str(data["name"]),
@@ -301,8 +326,11 @@ def load_court(name_or_path: str | Path) -> Court:
             materials=materials,
             lines=lines,
             ball=ball,
+            hits=hits,
+            event_groups=groups,
             source=path,
-            extra={k: v for k, v in data.items() if k not in {*required, "sport", "size", "net_y", "lines"}},
+            extra={k: v for k, v in data.items()
+                   if k not in {*required, "sport", "size", "net_y", "lines", "hits", "event_groups"}},
         )
     except (KeyError, TypeError, ValueError) as e:
         if isinstance(e, FormatError):

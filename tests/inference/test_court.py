@@ -127,3 +127,11 @@ def test_new_court_is_just_a_yaml(tmp_path, padel):
     path.write_text(text)
     court = load_court(path)
     assert court.name == "padel_variant" and court.sport == "padel"
+
+
+def test_hit_limits_and_event_groups(padel, tennis):
+    assert padel.hits.height == (0.0, 2.8) and padel.hits.reach > 0
+    assert tennis.hits.height[1] > 2.8  # overhead serves
+    group = {p.name for p in padel.planes_for("ground_or_other_wall")}
+    assert {"floor", "glass_far", "glass_left", "glass_right_far"} <= group
+    assert "glass_near" not in group
