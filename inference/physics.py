@@ -131,13 +131,16 @@ def rk4_step(state: tuple, h: float, c: tuple[float, ...]) -> tuple:
 
     Args:
         state: (x, y, z, vx, vy, vz, wx, wy, wz), each a float or an array of one shape (B,).
-        h: step (s), > 0.
+        h: step (s), > 0; a float, or a (B,) array of per-ball steps.
         c: ``FlightModel.kernel()``.
     Returns:
         the state after ``h``, same layout.
     """
     x, y, z, vx, vy, vz, wx, wy, wz = state
-    f2, f3, f4, fn = _spin_factors(h, c[5])
+    if isinstance(h, np.ndarray):  # one step size per ball
+        f2, f3, f4, fn = _spin_factors.__wrapped__(h, c[5])
+    else:
+        f2, f3, f4, fn = _spin_factors(h, c[5])
     hh = 0.5 * h
     ax1, ay1, az1 = _acceleration(vx, vy, vz, wx, wy, wz, c)
     ax2, ay2, az2 = _acceleration(vx + hh * ax1, vy + hh * ay1, vz + hh * az1, wx * f2, wy * f2, wz * f2, c)

@@ -240,7 +240,8 @@ class Clip:
 
         path = self._path("camera.yaml", gt)
         if not path.is_file():
-            raise FormatError(path, "file not found", fix="calibrate the clip from court_points.csv first")
+            raise FormatError(path, "file not found",
+                              fix=f"run `rally3d calibrate {self.root}` (court_points.csv → camera.yaml)")
         return Camera.load(path)
 
     def write_camera(self, camera: Camera, *, gt: bool = False) -> Path:

@@ -1,0 +1,58 @@
+"""One entry point for every reconstruction method, plus the per-shot figures every method reports."""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from inference.court import Court
+
+from .joint import fit_joint, net_height
+from .observations import Observations
+from .results import RallyFit, SegmentFit
+
+#: The default and the four published methods, in the order of the thesis's tables.
+METHOD_NAMES = ("gravity", "drag_shooting", "reprojection", "players", "joint")
+DEFAULT_METHOD = "joint"
+
+
+def methods() -> dict[str, Callable[[Observations], RallyFit]]:
+    """Method name → ``fn(obs) -> RallyFit``."""
+    from .baselines import fit_rally
+
+    out: dict[str, Callable[[Observations], RallyFit]] = {
+        name: (lambda obs, _n=name: fit_rally(obs, _n)) for name in METHOD_NAMES if name != "joint"}
+    out["joint"] = fit_joint
+    return out
+
+
+def reconstruct(obs: Observations, method: str = DEFAULT_METHOD) -> RallyFit:
+    """Reconstruct a rally with ``method`` (see :data:`METHOD_NAMES`) and add the per-shot figures."""
+    table = methods()
+    if method not in table:
+        raise ValueError(f"unknown reconstruction method {method!r}; choose one of {', '.join(METHOD_NAMES)}")
+    fit = table[method](obs)
+    for seg in fit.segments:
+        if seg.ok:
+            seg.figures.update(shot_figures(seg, obs.court))
+    return fit
+
+
+def shot_figures(seg: SegmentFit, court: Court) -> dict:
+    """Net clearance (m, where the flight crosses the net plane) and bounce position (floor contacts)."""
+    out: dict = {}
+    nets = [p for p in court.planes if p.event == "net"]
+    if nets and len(seg.xyz) > 1:
+        net = nets[0]
+        d = (seg.xyz - net.origin) @ net.normal
+        cross = np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0)
+        if len(cross):
+            k = int(cross[0])
+            f = d[k] / (d[k] - d[k + 1])
+            p = seg.xyz[k] + f * (seg.xyz[k + 1] - seg.xyz[k])
+            out["net_clearance_m"] = round(float(p[2] - court.ball.radius - net_height(net, p)), 3)
+    if seg.end_plane is not None and seg.end is not None:
+        plane = court.plane(seg.end_plane)
+        if plane.event == "ground":
+            out["bounce_position_m"] = [round(float(v), 3) for v in seg.end[:2]]
+    return out

@@ -1,0 +1,228 @@
+"""What the 3D reconstruction reads from a clip, and how a rally splits into flight segments.
+
+Inputs are the clip folder only: camera.yaml (``P`` alone suffices), ball.csv, events.csv and, when
+present, players.csv. Nothing needs court_points.csv, the video or ground truth.
+
+Example:
+    >>> obs = Observations.from_clip(Clip("datasets/sample/padel_sample"))
+    >>> segs = obs.segments()                     # flights between consecutive events
+    >>> priors = contact_priors(obs)              # 3D guesses for each event's contact point
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from inference.camera import Camera
+from inference.clipio import BallTrack, Clip, HitEvents, PlayerTracks
+from inference.court import Court, Plane, load_court
+from inference.geometry import intersect_planes
+
+PLAYER_EVENTS = ("player_near", "player_far")
+#: frames searched for a 2D ball around a surface contact when none is within 2 frames (the fit moves the
+#: contact point on its surface, so a rough first guess is enough)
+FAR_GAP = 10
+
+
+@dataclass
+class Observations:
+    """A rally's inputs, indexed by frame.
+
+    Attributes:
+        court, camera: the scene.
+        fps: frame rate.
+        uv: (F, 2) ball pixels for frames 0..F-1 (NaN where not visible or not labelled).
+        events: (E,) frames and (E,) labels, sorted by frame.
+        players: player tracks (court positions) or None.
+        source: where it came from (for messages).
+    """
+
+    court: Court
+    camera: Camera
+    fps: float
+    uv: np.ndarray
+    event_frames: np.ndarray
+    event_labels: list[str]
+    players: PlayerTracks | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        self.uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)
+        self.event_frames = np.asarray(self.event_frames, dtype=np.int64)
+        if len(self.event_frames) != len(self.event_labels):
+            raise ValueError("event_frames and event_labels must have the same length")
+        if len(self.event_frames) > 1 and np.any(np.diff(self.event_frames) <= 0):
+            raise ValueError("event frames must be strictly increasing")
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.uv)
+
+    @classmethod
+    def from_tables(cls, court: Court, camera: Camera, fps: float, track: BallTrack, events: HitEvents,
+                    n_frames: int, players: PlayerTracks | None = None, source: str = "") -> Observations:
+        """Build from the clip tables; the ball's normalised coordinates become pixels."""
+        uv = np.full((n_frames, 2), np.nan)
+        keep = (track.visibility > 0) & (track.frame < n_frames)
+        uv[track.frame[keep]] = track.xy[keep] * np.asarray(camera.image_size, float)
+        ev = events.frame < n_frames
+        return cls(court, camera, fps, uv, events.frame[ev], [str(e) for e in events.event[ev]], players, source)
+
+    @classmethod
+    def from_clip(cls, clip: Clip, court: Court | None = None, camera: Camera | None = None) -> Observations:
+        """Read camera.yaml, ball.csv, events.csv and players.csv (if present) of a clip."""
+        court = court or load_court(clip.court_path())
+        camera = camera or clip.read_camera()
+        players = clip.read_players(missing_ok=True)
+        return cls.from_tables(court, camera, clip.info.fps, clip.read_ball(), clip.read_events(), clip.n_frames,
+                               players if len(players) else None, str(clip.root))
+
+    def with_track(self, uv: np.ndarray) -> Observations:
+        """The same rally with other 2D positions (e.g. noisy or detected)."""
+        return Observations(self.court, self.camera, self.fps, uv, self.event_frames, list(self.event_labels),
+                            self.players, self.source)
+
+    def segments(self) -> list[Segment]:
+        """The flights between consecutive events (E-1 segments)."""
+        f, lab = self.event_frames, self.event_labels
+        return [Segment(i, int(f[i]), int(f[i + 1]), lab[i], lab[i + 1]) for i in range(len(f) - 1)]
+
+
+@dataclass(frozen=True)
+class Segment:
+    """The ball's flight from one contact (event) to the next.
+
+    Attributes:
+        index: position in the rally; start, end: event frames; start_event, end_event: their labels.
+    """
+
+    index: int
+    start: int
+    end: int
+    start_event: str
+    end_event: str
+
+    @property
+    def frames(self) -> np.ndarray:
+        """(n,) the frames from start to end inclusive."""
+        return np.arange(self.start, self.end + 1)
+
+    @property
+    def duration_frames(self) -> int:
+        return self.end - self.start
+
+
+@dataclass
+class ContactPrior:
+    """What is known about one contact before fitting.
+
+    Attributes:
+        frame: the event frame; label: its label.
+        kind: ``plane`` (floor/wall/net: the point lies on a known surface) or ``hit`` (a racket).
+        point: (3,) a first 3D guess of the ball centre (NaN if none could be made).
+        plane: the surface touched (for ``plane`` contacts whose line of sight meets one), else None.
+        candidates: the planes the label allows.
+        hitter_xy: (2,) the hitter's court position for a racket hit when players.csv has it.
+        reason: why no point could be made (empty when fine).
+    """
+
+    frame: int
+    label: str
+    kind: str
+    point: np.ndarray
+    plane: Plane | None = None
+    candidates: list[Plane] = field(default_factory=list)
+    hitter_xy: np.ndarray | None = None
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(np.isfinite(self.point)))
+
+
+def nearest_observed(uv: np.ndarray, frame: int, max_gap: int = 2) -> tuple[np.ndarray | None, int]:
+    """The ball pixel at ``frame``, or at the nearest frame within ``max_gap`` that has one."""
+    for d in range(max_gap + 1):
+        for f in (frame - d, frame + d):
+            if 0 <= f < len(uv) and np.all(np.isfinite(uv[f])):
+                return uv[f], f
+    return None, -1
+
+
+def hitter_position(obs: Observations, frame: int, label: str) -> np.ndarray | None:
+    """(2,) the court position of the hitter of a racket hit: the player of the named team nearest to the
+    ball's line of sight at that frame (players.csv), or None."""
+    if obs.players is None or label not in PLAYER_EVENTS:
+        return None
+    team = label.split("_")[1]
+    p = obs.players
+    rows = np.flatnonzero((p.frame == frame) & (p.team == team) & np.isfinite(p.court_xy).all(axis=1))
+    if not len(rows):
+        return None
+    uv, _ = nearest_observed(obs.uv, frame)
+    if uv is None or len(rows) == 1:
+        return p.court_xy[rows[0]]
+    o, d = obs.camera.rays(uv[None])
+    # distance from each candidate (at 1 m height) to the line of sight
+    X = np.column_stack([p.court_xy[rows], np.ones(len(rows))])
+    v = X - o
+    dist = np.linalg.norm(v - (v @ d[0])[:, None] * d, axis=1)
+    return p.court_xy[rows[int(np.argmin(dist))]]
+
+
+def hit_point_guess(obs: Observations, uv: np.ndarray, hitter_xy: np.ndarray | None) -> np.ndarray:
+    """(3,) a racket hit's 3D guess on the line of sight: at the hitter's depth when known, else at the
+    middle of the court's hit-height range."""
+    o, d = obs.camera.rays(uv[None])
+    o, d = o[0], d[0]
+    if hitter_xy is not None:
+        # the point of the ray closest (horizontally) to the hitter
+        dh = d[:2] / max(np.linalg.norm(d[:2]), 1e-9)
+        s = (hitter_xy - o[:2]) @ dh / max(np.linalg.norm(d[:2]), 1e-9)
+    else:
+        h = float(np.mean(obs.court.hits.height))
+        s = (h - o[2]) / d[2] if abs(d[2]) > 1e-9 else np.nan
+    lo, hi = obs.court.hits.height
+    p = o + s * d
+    if not np.isfinite(s) or s <= 0:
+        return np.full(3, np.nan)
+    if not lo <= p[2] <= hi:  # move along the ray into the height range
+        z = np.clip(p[2], lo, hi)
+        s = (z - o[2]) / d[2] if abs(d[2]) > 1e-9 else s
+        p = o + s * d
+    return p
+
+
+def contact_priors(obs: Observations) -> list[ContactPrior]:
+    """One :class:`ContactPrior` per event: surface contacts from the line of sight ∩ the label's planes
+    (ball radius included, first valid plane of a group), racket hits from the hitter or a height prior."""
+    out = []
+    r = obs.court.ball.radius
+    for frame, label in zip(obs.event_frames.tolist(), obs.event_labels):
+        uv, _ = nearest_observed(obs.uv, frame)
+        if label in PLAYER_EVENTS:
+            hitter = hitter_position(obs, frame, label)
+            point = hit_point_guess(obs, uv, hitter) if uv is not None else np.full(3, np.nan)
+            reason = "" if uv is not None else "no 2D ball near the hit frame"
+            out.append(ContactPrior(frame, label, "hit", point, hitter_xy=hitter, reason=reason))
+            continue
+        planes = obs.court.planes_for(label)
+        if not planes:
+            out.append(ContactPrior(frame, label, "plane", np.full(3, np.nan),
+                                    reason=f"court {obs.court.name} has no surface for event {label!r}"))
+            continue
+        if uv is None:  # e.g. a bounce on the near glass right under the camera: use a farther frame
+            uv, _ = nearest_observed(obs.uv, frame, max_gap=FAR_GAP)
+        if uv is None:
+            out.append(ContactPrior(frame, label, "plane", np.full(3, np.nan), candidates=planes,
+                                    reason=f"no 2D ball within {FAR_GAP} frames of the event"))
+            continue
+        o, d = obs.camera.rays(uv[None])
+        hit = intersect_planes(o, d, planes, offset=r)
+        if hit.valid[0]:
+            out.append(ContactPrior(frame, label, "plane", hit.points[0], planes[hit.plane_index[0]], planes))
+        else:
+            out.append(ContactPrior(frame, label, "plane", np.full(3, np.nan), candidates=planes,
+                                    reason=f"the line of sight at frame {frame} misses every {label} surface"))
+    return out
