@@ -155,19 +155,22 @@ def _hermite(p0, v0, p1, v1, u, dt):
 
 
 def _integrate(starts: np.ndarray, taus: np.ndarray, tau_end: np.ndarray, F0: np.ndarray, L: int, fps: float,
-               model: FlightModel, substeps: int) -> _Flights:
+               model: FlightModel, substeps: int, perturb: bool = True) -> _Flights:
     """Integrate S flights, each with its N_IN forward-difference perturbations, in one batch.
 
     Args:
         starts: (S, 9) [C | v | ω] at τ_s; taus: (S,) τ_s (frames); tau_end: (S,) τ_{s+1} (frames).
         F0: (S,) first frame of each flight's grid (≤ τ_s); L: frames on the grid.
+        perturb: also the N_IN forward-difference perturbations of each flight (else only the base).
     """
     S = len(starts)
+    V_ = 1 + N_IN if perturb else 1
     base = np.concatenate([starts, taus[:, None]], axis=1)            # (S, 10)
-    inp = np.repeat(base[:, None, :], 1 + N_IN, axis=1)                # (S, 11, 10)
-    inp[:, 1:, :] += np.diag(EPS)[None]
+    inp = np.repeat(base[:, None, :], V_, axis=1)                      # (S, V_, 10)
+    if perturb:
+        inp[:, 1:, :] += np.diag(EPS)[None]
     inp = inp.reshape(-1, N_IN)
-    f0 = np.repeat(F0, 1 + N_IN)
+    f0 = np.repeat(F0, V_)
     c = model.kernel()
     state = tuple(np.ascontiguousarray(inp[:, k]) for k in range(9))
     state = rk4_step(state, (f0 - inp[:, 9]) / fps, c)                 # to frame F0 (backwards if needed)
@@ -180,8 +183,8 @@ def _integrate(starts: np.ndarray, taus: np.ndarray, tau_end: np.ndarray, F0: np
         if j < L - 1:
             for _ in range(substeps):
                 state = rk4_step(state, h, c)
-    P = P.reshape(S, 1 + N_IN, L, 3)
-    V = V.reshape(S, 1 + N_IN, L, 3)
+    P = P.reshape(S, V_, L, 3)
+    V = V.reshape(S, V_, L, 3)
     ja = np.clip(np.floor(tau_end).astype(int) - F0, 0, L - 2)
     u = (tau_end - (F0 + ja))[:, None, None]
     rows = np.arange(S)
@@ -206,6 +209,7 @@ class _Problem:
         self.weights = np.ones(len(self.frames))  # Huber IRLS weights of the reprojection residuals
         net = [p for p in obs.court.planes if p.event == "net"]
         self.net = net[0] if net else None
+        self.net_normal = self.net.normal if self.net is not None else None
 
     # --- inputs of each flight and their derivatives wrt θ ------------------------------------------
     def _inputs(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -238,45 +242,44 @@ class _Problem:
             J[:, idx] += d_in[:, k:k + 1] * coef[None, :]
         return J
 
-    def evaluate(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
-        """Residuals (m,) and Jacobian (m, n) at θ, plus what the outputs need."""
+    def evaluate(self, theta: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict]:
+        """Residuals (m,) and, with ``jac``, the Jacobian (m, n) at θ, plus what the outputs need.
+
+        Without ``jac`` only the base flights are integrated (11× less work): LM's trial steps need no
+        Jacobian until one is accepted.
+        """
         ch, cfg = self.chain, self.cfg
         K = len(ch.segments)
         starts, taus, tau_end = self._inputs(theta)
         F0 = np.minimum(np.floor(taus), self.event_frames[:-1]).astype(int)
         F1 = np.maximum(np.ceil(tau_end), self.event_frames[1:]).astype(int) + 1
         L = int((F1 - F0).max()) + 1
-        fl = _integrate(starts, taus, tau_end, F0, L, self.fps, self.model, self.substeps)
-        rows_r, rows_J = [], []
+        fl = _integrate(starts, taus, tau_end, F0, L, self.fps, self.model, self.substeps, perturb=jac)
+        rows_r: list[np.ndarray] = []
+        rows_J: list[np.ndarray] = []
+
+        def add(r: np.ndarray, J_fn) -> None:
+            rows_r.append(r)
+            if jac:
+                rows_J.append(J_fn())
 
         # reprojection
         all_tau = np.array([theta[ct.tau] for ct in ch.contacts])
         seg_of = np.clip(np.searchsorted(all_tau[1:-1], self.frames, side="right"), 0, K - 1)
         j = self.frames - F0[seg_of]
-        pts = fl.P[seg_of, :, j]                                       # (M, 11, 3)
-        pix = self.obs.camera.project(pts.reshape(-1, 3)).reshape(len(j), 1 + N_IN, 2)
+        pts = fl.P[seg_of, :, j]                                       # (M, 1 | 11, 3)
+        pix = self.obs.camera.project(pts.reshape(-1, 3)).reshape(len(j), pts.shape[1], 2)
         r = (pix[:, 0] - self.uv) / cfg.pixel_sigma                    # (M, 2)
-        dpix = (pix[:, 1:] - pix[:, :1]) / EPS[None, :, None] / cfg.pixel_sigma  # (M, 10, 2)
         self.last_norm = np.linalg.norm(r, axis=1)
         w = self.weights
         for s in range(K):
             m = np.flatnonzero(seg_of == s)
-            if not len(m):
-                continue
-            d = dpix[m].transpose(0, 2, 1).reshape(-1, N_IN)           # (2|m|, 10)
-            rows_r.append((r[m] * w[m, None]).reshape(-1))
-            rows_J.append(self._to_theta(s, d) * np.repeat(w[m], 2)[:, None])
+            if len(m):
+                add((r[m] * w[m, None]).reshape(-1), lambda m=m, s=s: self._reproj_jac(pix[m], w[m], s))
 
         # continuity: flight s ends at contact s+1
         for s in range(K):
-            ct = ch.contacts[s + 1]
-            end = fl.end[s, 0]
-            d_end = (fl.end[s, 1:] - end[None]) / EPS[:, None]          # (10, 3)
-            J = self._to_theta(s, d_end.T)
-            J[:, ct.tau] += fl.vend[s, 0] / self.fps
-            J[:, ct.coords] -= ct.basis
-            rows_r.append((end - ch.point(theta, s + 1)) / cfg.continuity_sigma)
-            rows_J.append(J / cfg.continuity_sigma)
+            add((fl.end[s, 0] - ch.point(theta, s + 1)) / cfg.continuity_sigma, lambda s=s: self._cont_jac(fl, s))
 
         # restitution at surface contacts between two flights
         for s in range(1, K):
@@ -291,49 +294,66 @@ class _Problem:
             e = -b / a
             lo, hi = ct.restitution - cfg.restitution_margin, ct.restitution + cfg.restitution_margin
             viol = e - hi if e > hi else (e - lo if e < lo else 0.0)
-            J = np.zeros((1, ch.n))
-            if viol != 0.0:
-                d_vin = (fl.vend[s - 1, 1:] - vin[None]) / EPS[:, None]   # (10, 3)
-                J += self._to_theta(s - 1, (d_vin @ (b / a**2 * n))[None, :])
-                J[0, ch.vel[s]] += -n / a
-            rows_r.append(np.array([viol / cfg.restitution_sigma]))
-            rows_J.append(J / cfg.restitution_sigma)
+            add(np.array([viol / cfg.restitution_sigma]),
+                lambda s=s, n=n, a=a, b=b, vin=vin, viol=viol: self._rest_jac(fl, s, n, a, b, vin, viol))
 
         # net clearance for flights that do not touch the net
         if self.net is not None:
             for s in range(K):
                 if "net" in (ch.segments[s].start_event, ch.segments[s].end_event):
                     continue
-                r_net, J_net = self._net_residual(fl, s, taus[s], tau_end[s])
-                rows_r.append(r_net)
-                rows_J.append(J_net)
+                r_net, J_net = self._net_residual(fl, s, taus[s], tau_end[s], jac)
+                add(r_net, lambda J_net=J_net: J_net)
 
         # racket-hit limits (height range, near the hitter) and the contact-time prior
         for ct in ch.contacts:
             if ct.normal is None:
                 r_h, J_h = self._hit_limits(theta, ct)
-                rows_r.append(r_h)
-                rows_J.append(J_h)
-            J = np.zeros((1, ch.n))
-            J[0, ct.tau] = 1.0 / cfg.tau_sigma
-            rows_r.append(np.array([(theta[ct.tau] - ct.prior.frame) / cfg.tau_sigma]))
-            rows_J.append(J)
+                add(r_h, lambda J_h=J_h: J_h)
+            add(np.array([(theta[ct.tau] - ct.prior.frame) / cfg.tau_sigma]),
+                lambda ct=ct: self._unit_rows([ct.tau], 1.0 / cfg.tau_sigma))
 
         # spin prior
         for idx in ch.spin:
             if idx is not None:
-                J = np.zeros((3, ch.n))
-                J[:, idx] = np.eye(3) / cfg.spin_sigma
-                rows_r.append(theta[idx] / cfg.spin_sigma)
-                rows_J.append(J)
-        return np.concatenate(rows_r), np.vstack(rows_J), {"flights": fl, "seg_of": seg_of, "F0": F0}
+                add(theta[idx] / cfg.spin_sigma, lambda idx=idx: self._unit_rows(idx, 1.0 / cfg.spin_sigma))
+        J = np.vstack(rows_J) if jac else None
+        return np.concatenate(rows_r), J, {"flights": fl, "seg_of": seg_of, "F0": F0}
+
+    def _unit_rows(self, idx: list[int], scale: float) -> np.ndarray:
+        J = np.zeros((len(idx), self.chain.n))
+        J[np.arange(len(idx)), idx] = scale
+        return J
+
+    def _reproj_jac(self, pix: np.ndarray, w: np.ndarray, s: int) -> np.ndarray:
+        """(2m, n) Jacobian of the weighted reprojection residuals of m frames of flight s."""
+        dpix = (pix[:, 1:] - pix[:, :1]) / EPS[None, :, None] / self.cfg.pixel_sigma  # (m, 10, 2)
+        d = dpix.transpose(0, 2, 1).reshape(-1, N_IN)
+        return self._to_theta(s, d) * np.repeat(w, 2)[:, None]
+
+    def _cont_jac(self, fl: _Flights, s: int) -> np.ndarray:
+        ct = self.chain.contacts[s + 1]
+        d_end = (fl.end[s, 1:] - fl.end[s, :1]) / EPS[:, None]           # (10, 3)
+        J = self._to_theta(s, d_end.T)
+        J[:, ct.tau] += fl.vend[s, 0] / self.fps
+        J[:, ct.coords] -= ct.basis
+        return J / self.cfg.continuity_sigma
+
+    def _rest_jac(self, fl: _Flights, s: int, n, a, b, vin, viol) -> np.ndarray:
+        J = np.zeros((1, self.chain.n))
+        if viol != 0.0:
+            d_vin = (fl.vend[s - 1, 1:] - vin[None]) / EPS[:, None]       # (10, 3)
+            J += self._to_theta(s - 1, (d_vin @ (b / a**2 * n))[None, :])
+            J[0, self.chain.vel[s]] += -n / a
+        return J / self.cfg.restitution_sigma
 
     def reweight(self) -> None:
         """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
         k = self.cfg.huber_k
         self.weights = np.where(self.last_norm > k, np.sqrt(k / np.maximum(self.last_norm, 1e-12)), 1.0)
 
-    def _net_residual(self, fl: _Flights, s: int, tau0: float, tau1: float) -> tuple[np.ndarray, np.ndarray]:
+    def _net_residual(self, fl: _Flights, s: int, tau0: float, tau1: float,
+                      jac: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Hinge on the ball's height where the flight crosses the net plane (if it does)."""
         zero = (np.zeros(1), np.zeros((1, self.chain.n)))
         net = self.net
@@ -342,7 +362,7 @@ class _Problem:
         j1 = int(np.floor(tau1)) - fl.F0[s]
         if j1 - j0 < 1:
             return zero
-        d = (P[j0:j1 + 1] - net.origin) @ net.normal
+        d = (P[j0:j1 + 1] - net.origin) @ self.net_normal
         cross = np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0)
         if not len(cross):
             return zero
@@ -353,6 +373,8 @@ class _Problem:
         need = top + self.obs.court.ball.radius
         if p[2] >= need:
             return zero
+        if not jac:
+            return np.array([(need - p[2]) / self.cfg.net_sigma]), None
         dz = ((1 - f) * (fl.P[s, 1:, k, 2] - P[k, 2]) + f * (fl.P[s, 1:, k + 1, 2] - P[k + 1, 2])) / EPS
         J = -self._to_theta(s, dz[None, :]) / self.cfg.net_sigma
         return np.array([(need - p[2]) / self.cfg.net_sigma]), J
@@ -499,11 +521,12 @@ def _lm(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
                 lam *= 10
                 continue
             cand = _clamp(chain, theta + step, cfg)
-            r2, J2, aux2 = problem.evaluate(cand)
+            r2, _, _ = problem.evaluate(cand, jac=False)
             cost2 = float(r2 @ r2)
             if np.isfinite(cost2) and cost2 < cost:
                 rel = (cost - cost2) / max(cost, 1e-12)
-                theta, r, J, aux, cost = cand, r2, J2, aux2, cost2
+                theta, cost = cand, cost2
+                r, J, aux = problem.evaluate(theta)
                 lam = max(lam / 3, 1e-9)
                 improved = True
                 break
