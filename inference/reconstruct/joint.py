@@ -47,8 +47,9 @@ class JointConfig:
     limit_sigma: float = 0.05         # m, hinge penalties of the hit limits
     fit_spin: bool = True
     max_iter: int = 60               # LM iterations per pass
-    irls_passes: int = 2              # robust reweighting passes
-    tolerance: float = 1e-5           # stop when the cost falls by less than this fraction
+    irls_passes: int = 3              # robust reweighting passes (the later ones only with outliers)
+    reweighted_iter: int = 6          # LM iterations of each reweighted pass
+    tolerance: float = 1e-4           # stop when the cost falls by less than this fraction
     min_observed: int = 3             # 2D points (contact frames included) a flight needs
     steps_per_second: float = 20.0    # RK4 steps per second at least (one per frame is < 1 µm off at 30 fps)
     hit_candidates: int = 48          # depths tried when initialising a racket hit
@@ -210,6 +211,7 @@ class _Problem:
         net = [p for p in obs.court.planes if p.event == "net"]
         self.net = net[0] if net else None
         self.net_normal = self.net.normal if self.net is not None else None
+        self.input_maps = [self._input_map(s) for s in range(len(chain.segments))]
 
     # --- inputs of each flight and their derivatives wrt θ ------------------------------------------
     def _inputs(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,6 +226,13 @@ class _Problem:
         taus = np.array([theta[ct.tau] for ct in ch.contacts])
         return starts, taus[:-1], taus[1:]
 
+    def _input_map(self, s: int) -> np.ndarray:
+        """(N_IN, n) constant matrix d(flight s's inputs)/dθ."""
+        M = np.zeros((N_IN, self.chain.n))
+        for k, idx, coef in self._din_dtheta(s):
+            M[k, idx] += coef
+        return M
+
     def _din_dtheta(self, s: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
         """For flight s: (input index k, θ indices, d input_k / d θ[indices]) entries."""
         ch = self.chain
@@ -237,10 +246,7 @@ class _Problem:
 
     def _to_theta(self, s: int, d_in: np.ndarray) -> np.ndarray:
         """(R, N_IN) derivatives wrt flight s's inputs → (R, n) wrt θ."""
-        J = np.zeros((len(d_in), self.chain.n))
-        for k, idx, coef in self._din_dtheta(s):
-            J[:, idx] += d_in[:, k:k + 1] * coef[None, :]
-        return J
+        return d_in @ self.input_maps[s]
 
     def evaluate(self, theta: np.ndarray, jac: bool = True) -> tuple[np.ndarray, np.ndarray | None, dict]:
         """Residuals (m,) and, with ``jac``, the Jacobian (m, n) at θ, plus what the outputs need.
@@ -493,23 +499,25 @@ def _clamp(chain: _Chain, theta: np.ndarray, cfg: JointConfig) -> np.ndarray:
 # Levenberg-Marquardt
 # ---------------------------------------------------------------------------------------------------
 def _solve(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, int]:
-    """Iteratively reweighted LM: a pass with unit weights, then passes with Huber weights."""
-    total = 0
-    for _ in range(problem.cfg.irls_passes):
-        theta, r, J, aux, n = _lm(problem, theta)
-        total += n
+    """Iteratively reweighted LM: a pass with unit weights, then short passes with Huber weights while
+    some 2D points lie beyond ``huber_k`` σ (outliers are down-weighted, not dropped)."""
+    theta, r, J, aux, total = _lm(problem, theta, problem.cfg.max_iter)
+    for _ in range(problem.cfg.irls_passes - 1):
         problem.reweight()
-    r, J, aux = problem.evaluate(theta)
+        if np.all(problem.weights == 1.0):
+            break
+        theta, r, J, aux, n = _lm(problem, theta, problem.cfg.reweighted_iter)
+        total += n
     return theta, r, J, aux, total
 
 
-def _lm(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, int]:
+def _lm(problem: _Problem, theta: np.ndarray, max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, int]:
     cfg, chain = problem.cfg, problem.chain
     r, J, aux = problem.evaluate(theta)
     cost = float(r @ r)
     lam = 1e-3
     it = 0
-    for it in range(cfg.max_iter):  # noqa: B007
+    for it in range(max_iter):  # noqa: B007
         A = J.T @ J
         g = J.T @ r
         D = np.diag(np.maximum(np.diag(A), 1e-9))
@@ -590,9 +598,10 @@ def _frame_sigma(problem: _Problem, theta: np.ndarray, J: np.ndarray, r: np.ndar
     fl, out = aux["flights"], {}
     for s in range(len(problem.chain.segments)):
         dP = (fl.P[s, 1:] - fl.P[s, :1]) / EPS[:, None, None]          # (10, L, 3)
-        for j in range(dP.shape[1]):
-            Jp = problem._to_theta(s, dP[:, j].T)                     # (3, n)
-            out[(s, j)] = float(np.sqrt(max(np.einsum("ij,jk,ik->", Jp, cov, Jp), 0.0)))
+        Jp = np.einsum("kjd,kn->jdn", dP, problem.input_maps[s])       # (L, 3, n)
+        var = np.einsum("jdn,nm,jdm->j", Jp, cov, Jp)
+        for j, v in enumerate(np.sqrt(np.maximum(var, 0.0))):
+            out[(s, j)] = float(v)
     return out
 
 
