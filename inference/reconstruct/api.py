@@ -34,12 +34,13 @@ def reconstruct(obs: Observations, method: str = DEFAULT_METHOD) -> RallyFit:
     fit = table[method](obs)
     for seg in fit.segments:
         if seg.ok:
-            seg.figures.update(shot_figures(seg, obs.court))
+            seg.figures.update(shot_figures(seg, obs.court, obs.fps))
     return fit
 
 
-def shot_figures(seg: SegmentFit, court: Court) -> dict:
-    """Net clearance (m, where the flight crosses the net plane) and bounce position (floor contacts)."""
+def shot_figures(seg: SegmentFit, court: Court, fps: float) -> dict:
+    """Net clearance (m, where the flight crosses the net plane); for a flight ending on the floor, the
+    bounce position (m) and the speed at the bounce (km/h)."""
     out: dict = {}
     nets = [p for p in court.planes if p.event == "net"]
     if nets and len(seg.xyz) > 1:
@@ -55,4 +56,6 @@ def shot_figures(seg: SegmentFit, court: Court) -> dict:
         plane = court.plane(seg.end_plane)
         if plane.event == "ground":
             out["bounce_position_m"] = [round(float(v), 3) for v in seg.end[:2]]
+            speed = np.linalg.norm(seg.xyz[-1] - seg.xyz[-2]) * fps if len(seg.xyz) > 1 else np.nan
+            out["bounce_speed_kmh"] = round(float(speed) * 3.6, 1)
     return out

@@ -46,6 +46,8 @@ class JointConfig:
     net_sigma: float = 0.02           # m
     limit_sigma: float = 0.05         # m, hinge penalties of the hit limits
     fit_spin: bool = True
+    fit_drag: bool = False            # fit a drag multiplier per flight (prior 1 ± drag_sigma)
+    drag_sigma: float = 0.2
     max_iter: int = 60               # LM iterations per pass
     irls_passes: int = 3              # robust reweighting passes (the later ones only with outliers)
     reweighted_iter: int = 6          # LM iterations of each reweighted pass
@@ -77,6 +79,7 @@ class _Chain:
     contacts: list[_Contact] = field(default_factory=list)
     vel: list[list[int]] = field(default_factory=list)
     spin: list[list[int] | None] = field(default_factory=list)
+    drag: list[int | None] = field(default_factory=list)
     n: int = 0
 
     def point(self, theta: np.ndarray, c: int) -> np.ndarray:
@@ -121,6 +124,11 @@ def _build_chain(obs: Observations, segs: list[Segment], priors: list[ContactPri
             theta.extend([0.0, 0.0, 0.0])
         else:
             chain.spin.append(None)
+        if cfg.fit_drag:
+            chain.drag.append(len(theta))
+            theta.append(1.0)
+        else:
+            chain.drag.append(None)
     chain.n = len(theta)
     return chain, np.array(theta)
 
@@ -128,8 +136,8 @@ def _build_chain(obs: Observations, segs: list[Segment], priors: list[ContactPri
 # ---------------------------------------------------------------------------------------------------
 # Batched flights with finite-difference perturbations
 # ---------------------------------------------------------------------------------------------------
-N_IN = 10  # flight inputs: C (3), v (3), ω (3), τ (1)
-EPS = np.array([1e-4] * 3 + [1e-4] * 3 + [1e-2] * 3 + [1e-4])
+N_IN = 11  # flight inputs: C (3), v (3), ω (3), τ (1), drag scale (1)
+EPS = np.array([1e-4] * 3 + [1e-4] * 3 + [1e-2] * 3 + [1e-4] + [1e-3])
 
 
 @dataclass
@@ -160,19 +168,20 @@ def _integrate(starts: np.ndarray, taus: np.ndarray, tau_end: np.ndarray, F0: np
     """Integrate S flights, each with its N_IN forward-difference perturbations, in one batch.
 
     Args:
-        starts: (S, 9) [C | v | ω] at τ_s; taus: (S,) τ_s (frames); tau_end: (S,) τ_{s+1} (frames).
+        starts: (S, 10) [C | v | ω | drag scale] at τ_s; taus: (S,) τ_s (frames); tau_end: (S,) τ_{s+1}.
         F0: (S,) first frame of each flight's grid (≤ τ_s); L: frames on the grid.
         perturb: also the N_IN forward-difference perturbations of each flight (else only the base).
     """
     S = len(starts)
     V_ = 1 + N_IN if perturb else 1
-    base = np.concatenate([starts, taus[:, None]], axis=1)            # (S, 10)
+    base = np.concatenate([starts[:, :9], taus[:, None], starts[:, 9:]], axis=1)  # (S, N_IN)
     inp = np.repeat(base[:, None, :], V_, axis=1)                      # (S, V_, 10)
     if perturb:
         inp[:, 1:, :] += np.diag(EPS)[None]
     inp = inp.reshape(-1, N_IN)
     f0 = np.repeat(F0, V_)
-    c = model.kernel()
+    c = list(model.kernel())
+    c[1] = c[1] * inp[:, 10]                                          # per-flight drag
     state = tuple(np.ascontiguousarray(inp[:, k]) for k in range(9))
     state = rk4_step(state, (f0 - inp[:, 9]) / fps, c)                 # to frame F0 (backwards if needed)
     h = 1.0 / (fps * substeps)
@@ -217,12 +226,15 @@ class _Problem:
     def _inputs(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         ch = self.chain
         K = len(ch.segments)
-        starts = np.zeros((K, 9))
+        starts = np.zeros((K, 10))
+        starts[:, 9] = 1.0
         for s in range(K):
             starts[s, :3] = ch.point(theta, s)
             starts[s, 3:6] = theta[ch.vel[s]]
             if ch.spin[s] is not None:
                 starts[s, 6:9] = theta[ch.spin[s]]
+            if ch.drag[s] is not None:
+                starts[s, 9] = theta[ch.drag[s]]
         taus = np.array([theta[ct.tau] for ct in ch.contacts])
         return starts, taus[:-1], taus[1:]
 
@@ -242,6 +254,8 @@ class _Problem:
         if ch.spin[s] is not None:
             out += [(6 + k, np.array([ch.spin[s][k]]), np.ones(1)) for k in range(3)]
         out.append((9, np.array([ct.tau]), np.ones(1)))
+        if ch.drag[s] is not None:
+            out.append((10, np.array([ch.drag[s]]), np.ones(1)))
         return out
 
     def _to_theta(self, s: int, d_in: np.ndarray) -> np.ndarray:
@@ -319,10 +333,14 @@ class _Problem:
             add(np.array([(theta[ct.tau] - ct.prior.frame) / cfg.tau_sigma]),
                 lambda ct=ct: self._unit_rows([ct.tau], 1.0 / cfg.tau_sigma))
 
-        # spin prior
+        # spin prior, drag prior
         for idx in ch.spin:
             if idx is not None:
                 add(theta[idx] / cfg.spin_sigma, lambda idx=idx: self._unit_rows(idx, 1.0 / cfg.spin_sigma))
+        for idx in ch.drag:
+            if idx is not None:
+                add(np.array([(theta[idx] - 1.0) / cfg.drag_sigma]),
+                    lambda idx=idx: self._unit_rows([idx], 1.0 / cfg.drag_sigma))
         J = np.vstack(rows_J) if jac else None
         return np.concatenate(rows_r), J, {"flights": fl, "seg_of": seg_of, "F0": F0}
 
@@ -333,13 +351,13 @@ class _Problem:
 
     def _reproj_jac(self, pix: np.ndarray, w: np.ndarray, s: int) -> np.ndarray:
         """(2m, n) Jacobian of the weighted reprojection residuals of m frames of flight s."""
-        dpix = (pix[:, 1:] - pix[:, :1]) / EPS[None, :, None] / self.cfg.pixel_sigma  # (m, 10, 2)
+        dpix = (pix[:, 1:] - pix[:, :1]) / EPS[None, :, None] / self.cfg.pixel_sigma  # (m, N_IN, 2)
         d = dpix.transpose(0, 2, 1).reshape(-1, N_IN)
         return self._to_theta(s, d) * np.repeat(w, 2)[:, None]
 
     def _cont_jac(self, fl: _Flights, s: int) -> np.ndarray:
         ct = self.chain.contacts[s + 1]
-        d_end = (fl.end[s, 1:] - fl.end[s, :1]) / EPS[:, None]           # (10, 3)
+        d_end = (fl.end[s, 1:] - fl.end[s, :1]) / EPS[:, None]           # (N_IN, 3)
         J = self._to_theta(s, d_end.T)
         J[:, ct.tau] += fl.vend[s, 0] / self.fps
         J[:, ct.coords] -= ct.basis
@@ -348,7 +366,7 @@ class _Problem:
     def _rest_jac(self, fl: _Flights, s: int, n, a, b, vin, viol) -> np.ndarray:
         J = np.zeros((1, self.chain.n))
         if viol != 0.0:
-            d_vin = (fl.vend[s - 1, 1:] - vin[None]) / EPS[:, None]       # (10, 3)
+            d_vin = (fl.vend[s - 1, 1:] - vin[None]) / EPS[:, None]       # (N_IN, 3)
             J += self._to_theta(s - 1, (d_vin @ (b / a**2 * n))[None, :])
             J[0, self.chain.vel[s]] += -n / a
         return J / self.cfg.restitution_sigma
@@ -597,7 +615,7 @@ def _frame_sigma(problem: _Problem, theta: np.ndarray, J: np.ndarray, r: np.ndar
         return {}
     fl, out = aux["flights"], {}
     for s in range(len(problem.chain.segments)):
-        dP = (fl.P[s, 1:] - fl.P[s, :1]) / EPS[:, None, None]          # (10, L, 3)
+        dP = (fl.P[s, 1:] - fl.P[s, :1]) / EPS[:, None, None]          # (N_IN, L, 3)
         Jp = np.einsum("kjd,kn->jdn", dP, problem.input_maps[s])       # (L, 3, n)
         var = np.einsum("jdn,nm,jdm->j", Jp, cov, Jp)
         for j, v in enumerate(np.sqrt(np.maximum(var, 0.0))):
@@ -661,6 +679,6 @@ def _chain_fits(problem: _Problem, theta: np.ndarray, r: np.ndarray, J: np.ndarr
             end_plane=b.prior.plane.name if b.prior.plane else None,
             velocity=theta[chain.vel[s]].copy(),
             spin=theta[chain.spin[s]].copy() if chain.spin[s] is not None else np.zeros(3),
-            drag_k=model.drag_k, reproj_rms_px=float(np.sqrt(np.mean(err**2))) if len(err) else float("nan"),
+            drag_k=model.drag_k * (theta[chain.drag[s]] if chain.drag[s] is not None else 1.0), reproj_rms_px=float(np.sqrt(np.mean(err**2))) if len(err) else float("nan"),
             n_observed=int(seen.sum()))
     return out

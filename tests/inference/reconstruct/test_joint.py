@@ -59,7 +59,8 @@ def test_outputs_cover_every_frame_with_uncertainty(padel):
     assert set(b.kind[np.isin(b.frame, ev)].tolist()) == {"contact"}
     seg = fit.segments_json()["segments"]
     assert seg[1]["start_event"] == "player_near" and "launch_speed_kmh" in seg[1]
-    assert any("bounce_position_m" in s for s in seg) and any("net_clearance_m" in s for s in seg)
+    assert any("bounce_position_m" in s and "bounce_speed_kmh" in s for s in seg)
+    assert any("net_clearance_m" in s for s in seg)
     floor = [s for s in seg if s.get("end_plane") == "floor"]
     assert all(abs(s["end_point_m"][2] - obs.court.ball.radius) < 1e-6 for s in floor)
 
