@@ -529,11 +529,17 @@ def _solve(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return theta, r, J, aux, total
 
 
+#: Levenberg-Marquardt damping: start nearly Gauss-Newton and change it tenfold (on held-out synthetic
+#: rallies this lands in better minima, in fewer iterations, than gentler schedules).
+LM_LAMBDA0 = 1e-4
+LM_FACTOR = 10.0
+
+
 def _lm(problem: _Problem, theta: np.ndarray, max_iter: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, int]:
     cfg, chain = problem.cfg, problem.chain
     r, J, aux = problem.evaluate(theta)
     cost = float(r @ r)
-    lam = 1e-3
+    lam = LM_LAMBDA0
     it = 0
     for it in range(max_iter):  # noqa: B007
         A = J.T @ J
@@ -553,10 +559,10 @@ def _lm(problem: _Problem, theta: np.ndarray, max_iter: int) -> tuple[np.ndarray
                 rel = (cost - cost2) / max(cost, 1e-12)
                 theta, cost = cand, cost2
                 r, J, aux = problem.evaluate(theta)
-                lam = max(lam / 3, 1e-9)
+                lam = max(lam / LM_FACTOR, 1e-9)
                 improved = True
                 break
-            lam *= 4
+            lam *= LM_FACTOR
         if not improved or rel < cfg.tolerance:
             break
     return theta, r, J, aux, it + 1
