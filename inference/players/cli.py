@@ -1,0 +1,62 @@
+"""``rally3d players``: poses → tracked players with teams and court positions (players.csv)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from .backends import BACKENDS
+    from .tracking import TRACKERS
+
+    p = sub.add_parser(
+        "players",
+        help="track the players of a clip and write players.csv (teams, keypoints, court positions)",
+        description="Runs a pose backend (or imports another tool's predictions), tracks identities "
+        "(OC-SORT), keeps the players (time on court + distance travelled, per side), assigns teams by "
+        "court side, fills short gaps and places each player on court through camera.yaml.",
+    )
+    p.add_argument("clip", type=Path)
+    p.add_argument("--pose", choices=BACKENDS, default="import", help="pose backend (default: import)")
+    p.add_argument("--predictions", type=Path, help="import: predictions file or folder (MMPose/RTMPose "
+                   "JSON, COCO, OpenPose, Ultralytics, CSV)")
+    p.add_argument("--format", default="auto", help="import: mmpose, coco, openpose, ultralytics, csv (default auto)")
+    p.add_argument("--pose-model", type=Path, help="rtmpose/rtmo: the pose ONNX file")
+    p.add_argument("--det-model", type=Path, help="rtmpose: the person detector (YOLOX) ONNX file")
+    p.add_argument("--model", type=Path, help="movenet: the MultiPose Lightning .tflite file")
+    p.add_argument("--tracker", choices=TRACKERS, default="ocsort")
+    p.add_argument("--gt-camera", action="store_true", help="use gt/camera.yaml instead of camera.yaml")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from inference.clipio import Clip
+    from inference.court import load_court
+
+    from .backends import BackendUnavailable, make_backend
+    from .tracking import TrackingConfig, players_from_poses
+
+    clip = Clip(args.clip)
+    camera = clip.read_camera(gt=args.gt_camera)
+    court = load_court(clip.court_path())
+    backend = make_backend(args.pose, predictions=args.predictions, fmt=args.format, pose_model=args.pose_model,
+                           det_model=args.det_model, model=args.model)
+    ok, reason = backend.available()
+    if not ok:
+        raise BackendUnavailable(f"pose backend {args.pose!r}: {reason}")
+    poses = backend.run(clip)
+    players = players_from_poses(poses, camera, court, clip.info.fps, TrackingConfig(tracker=args.tracker))
+    path = clip.write_players(players)
+    n_det = sum(len(p) for p in poses.frames)
+    print(f"{clip.root.name}: {n_det} detections in {len(poses)} frames → {len(players.ids())} players")
+    for pid in players.ids():
+        rows = players.of_player(pid)
+        med = np.nanmedian(rows.court_xy, axis=0)
+        print(f"  player {pid} ({rows.team[0]}): {len(rows)} frames, median court position "
+              f"({med[0]:.2f}, {med[1]:.2f}) m")
+    if len(players.ids()) < court.n_players:
+        print(f"warning: found {len(players.ids())} of {court.n_players} players")
+    print(f"wrote {path}")
+    return 0

@@ -1,0 +1,236 @@
+"""From per-frame poses to the clip's players: identity tracking, stitching, selection, teams, gaps.
+
+1. **Tracking** with OC-SORT (or ByteTrack / SORT) from Roboflow's maintained ``trackers`` library on the
+   people's boxes; keypoints ride along with their detections.
+2. **Stitching**: a track that ends and another that starts soon after, close enough on court for a
+   player's speed, are the same person (identities survive long occlusions and crossings).
+3. **Selection** as in the thesis: time on court plus distance travelled, the best ``n/2`` per court
+   side (spectators, umpires and ball kids stand off court or still).
+4. **Teams** by court side (near: y < net), ids 0..n-1 near team first, left to right.
+5. **Gaps** up to ``max_gap_s`` are filled by linear interpolation.
+
+Example:
+    >>> tracks = players_from_poses(poses, camera, court, fps=30.0)      # PlayerTracks (players.csv)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from inference.camera import Camera
+from inference.clipio import PlayerTracks
+from inference.court import Court
+
+from .positions import ANKLE_HEIGHT, court_positions
+from .types import J, PoseSequence
+
+TRACKERS = ("ocsort", "bytetrack", "sort")
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Knobs of the player pipeline."""
+
+    tracker: str = "ocsort"
+    min_person_score: float = 0.2     # detections below are dropped before tracking
+    lost_buffer_s: float = 1.0        # the tracker keeps a lost track this long
+    min_consecutive: int = 2          # frames before a track is confirmed
+    iou_threshold: float = 0.1        # small far-court boxes overlap little between frames
+    stitch_gap_s: float = 3.0         # fragments this far apart in time may be joined ...
+    max_speed: float = 8.0            # ... if a player could run between them (m/s)
+    max_gap_s: float = 0.6            # gaps filled by interpolation
+    court_margin: float = 1.5         # m beyond the court's lines that still count as "on court"
+    distance_weight: float = 0.3      # selection score = seconds on court + weight × metres travelled
+    ankle_height: float = ANKLE_HEIGHT
+    min_kp_score: float = 0.3
+
+
+@dataclass
+class Track:
+    """One tracked person: (T,) frames and per-frame arrays aligned with them."""
+
+    frames: np.ndarray
+    boxes: np.ndarray       # (T, 4)
+    keypoints: np.ndarray   # (T, 17, 2)
+    kp_scores: np.ndarray   # (T, 17)
+    scores: np.ndarray      # (T,)
+    court: np.ndarray       # (T, 2), NaN where unknown
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def concat(self, other: Track) -> Track:
+        return Track(*(np.concatenate([getattr(self, f), getattr(other, f)]) for f in
+                       ("frames", "boxes", "keypoints", "kp_scores", "scores", "court")))
+
+    def median_court(self) -> np.ndarray:
+        ok = np.isfinite(self.court).all(axis=1)
+        return np.median(self.court[ok], axis=0) if ok.any() else np.full(2, np.nan)
+
+
+def _make_tracker(cfg: TrackingConfig, fps: float):
+    import trackers  # imported here: it takes about a second
+
+    if cfg.tracker not in TRACKERS:
+        raise ValueError(f"unknown tracker {cfg.tracker!r}; choose one of {TRACKERS}")
+    buffer = max(1, int(round(cfg.lost_buffer_s * fps)))
+    common = dict(lost_track_buffer=buffer, frame_rate=fps, minimum_consecutive_frames=cfg.min_consecutive,
+                  minimum_iou_threshold=cfg.iou_threshold)
+    cls = {"ocsort": trackers.OCSORTTracker, "bytetrack": trackers.ByteTrackTracker,
+           "sort": trackers.SORTTracker}[cfg.tracker]
+    return cls(**common)
+
+
+def track_people(seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingConfig) -> list[Track]:
+    """Run the tracker over the clip's poses; one :class:`Track` per tracker identity."""
+    import supervision as sv
+
+    tracker = _make_tracker(cfg, fps)
+    rows: dict[int, list] = {}
+    for f, persons in enumerate(seq.frames):
+        keep = persons.scores >= cfg.min_person_score
+        keep &= np.isfinite(persons.boxes).all(axis=1) & (persons.boxes[:, 2] > persons.boxes[:, 0])
+        p = persons.select(keep)
+        det = sv.Detections(xyxy=p.boxes.astype(np.float32), confidence=p.scores.astype(np.float32),
+                            class_id=np.zeros(len(p), int), data={"idx": np.arange(len(p))})
+        out = tracker.update(det)
+        if len(out) == 0:
+            continue
+        court = court_positions(p.keypoints, p.kp_scores, camera, cfg.ankle_height, cfg.min_kp_score)
+        for tid, i in zip(out.tracker_id, out.data["idx"]):
+            if tid < 0:
+                continue
+            rows.setdefault(int(tid), []).append((f, p.boxes[i], p.keypoints[i], p.kp_scores[i], p.scores[i],
+                                                  court[i]))
+    return [Track(*(np.array([r[k] for r in rs]) for k in range(6))) for rs in rows.values()]
+
+
+def stitch(tracks: list[Track], fps: float, cfg: TrackingConfig) -> list[Track]:
+    """Join fragments of one person: greedily link a track's end to the nearest later start that a player
+    could reach in the gap (on court), never overlapping in time."""
+    tracks = sorted(tracks, key=lambda t: t.frames[0])
+    changed = True
+    while changed:
+        changed = False
+        best = None
+        for i, a in enumerate(tracks):
+            end_f, end_p = a.frames[-1], _last_position(a)
+            for j, b in enumerate(tracks):
+                gap = (b.frames[0] - end_f) / fps
+                if j == i or gap <= 0 or gap > cfg.stitch_gap_s:
+                    continue
+                d = float(np.linalg.norm(_first_position(b) - end_p))
+                if np.isfinite(d) and d <= cfg.max_speed * gap + 0.5 and (best is None or d < best[0]):
+                    best = (d, i, j)
+        if best is not None:
+            _, i, j = best
+            merged = tracks[i].concat(tracks[j])
+            tracks = [t for k, t in enumerate(tracks) if k not in (i, j)] + [merged]
+            tracks.sort(key=lambda t: t.frames[0])
+            changed = True
+    return tracks
+
+
+def _last_position(t: Track) -> np.ndarray:
+    ok = np.flatnonzero(np.isfinite(t.court).all(axis=1))
+    return t.court[ok[-1]] if len(ok) else np.full(2, np.nan)
+
+
+def _first_position(t: Track) -> np.ndarray:
+    ok = np.flatnonzero(np.isfinite(t.court).all(axis=1))
+    return t.court[ok[0]] if len(ok) else np.full(2, np.nan)
+
+
+def on_court(court_xy: np.ndarray, court: Court, margin: float) -> np.ndarray:
+    """(T, 2) positions → (T,) inside the court's lines extended by ``margin`` metres."""
+    sx, sy = court.size
+    x, y = court_xy[:, 0], court_xy[:, 1]
+    with np.errstate(invalid="ignore"):
+        return (x >= -margin) & (x <= sx + margin) & (y >= -margin) & (y <= sy + margin)
+
+
+def selection_score(t: Track, court: Court, fps: float, cfg: TrackingConfig) -> float:
+    """Seconds on court + weight × metres travelled on court (the thesis's player selection)."""
+    inside = on_court(t.court, court, cfg.court_margin)
+    pts = t.court[inside]
+    dist = float(np.nansum(np.linalg.norm(np.diff(pts, axis=0), axis=1))) if len(pts) > 1 else 0.0
+    return inside.sum() / fps + cfg.distance_weight * dist
+
+
+def select_players(tracks: list[Track], court: Court, fps: float, cfg: TrackingConfig) -> list[Track]:
+    """The best ``court.n_players / 2`` tracks on each side of the net, near side first, left to right."""
+    per_side = max(1, court.n_players // 2)
+    sides: dict[str, list[tuple[float, Track]]] = {"near": [], "far": []}
+    for t in tracks:
+        m = t.median_court()
+        if not np.isfinite(m).all():
+            continue
+        score = selection_score(t, court, fps, cfg)
+        if score > 0:
+            sides["near" if m[1] < court.net_y else "far"].append((score, t))
+    chosen = []
+    for side in ("near", "far"):
+        best = sorted(sides[side], key=lambda st: -st[0])[:per_side]
+        chosen += sorted((t for _, t in best), key=lambda t: t.median_court()[0])
+    return chosen
+
+
+def interpolate(t: Track, fps: float, cfg: TrackingConfig) -> Track:
+    """Fill gaps of at most ``max_gap_s`` by linear interpolation of every per-frame array."""
+    max_gap = int(round(cfg.max_gap_s * fps))
+    full = np.arange(t.frames[0], t.frames[-1] + 1)
+    gap_to_prev = np.searchsorted(t.frames, full)
+    known = np.isin(full, t.frames)
+    # frames inside a gap short enough to fill
+    prev = t.frames[np.clip(gap_to_prev - 1, 0, len(t.frames) - 1)]
+    nxt = t.frames[np.clip(gap_to_prev, 0, len(t.frames) - 1)]
+    fill = known | ((nxt - prev) <= max_gap + 1)
+    frames = full[fill]
+
+    def interp(values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(len(values), -1)
+        out = np.empty((len(frames), flat.shape[1]))
+        for k in range(flat.shape[1]):
+            ok = np.isfinite(flat[:, k])
+            out[:, k] = np.interp(frames, t.frames[ok], flat[ok, k]) if ok.sum() > 1 else (
+                flat[ok, k][0] if ok.any() else np.nan)
+        return out.reshape((len(frames),) + values.shape[1:])
+
+    scores = np.interp(frames, t.frames, t.scores)
+    kp_scores = interp(t.kp_scores)
+    new = ~np.isin(frames, t.frames)
+    scores[new] *= 0.5  # interpolated rows are marked by a halved score
+    return Track(frames, interp(t.boxes), interp(t.keypoints), kp_scores, scores, interp(t.court))
+
+
+def to_player_tracks(players: list[Track], court: Court, image_size: tuple[int, int]) -> PlayerTracks:
+    """players.csv rows: ids in list order, team by side, normalised boxes and keypoints."""
+    wh = np.asarray(image_size, float)
+    rows = []
+    for pid, t in enumerate(players):
+        team = "near" if t.median_court()[1] < court.net_y else "far"
+        kp = np.concatenate([t.keypoints / wh, t.kp_scores[..., None]], axis=2)
+        for k, f in enumerate(t.frames):
+            rows.append((int(f), pid, team, float(t.scores[k]), t.boxes[k] / np.tile(wh, 2), kp[k], t.court[k]))
+    if not rows:
+        return PlayerTracks.empty()
+    rows.sort(key=lambda r: (r[0], r[1]))
+    n = len(rows)
+    return PlayerTracks(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), [r[2] for r in rows],
+                        np.array([r[3] for r in rows]), np.array([r[4] for r in rows]).reshape(n, 4),
+                        np.array([r[5] for r in rows]).reshape(n, J, 3), np.array([r[6] for r in rows]).reshape(n, 2))
+
+
+def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: float,
+                       config: TrackingConfig | None = None) -> PlayerTracks:
+    """The whole pipeline: track → stitch → select per side → interpolate gaps → players.csv table."""
+    cfg = config or TrackingConfig()
+    tracks = track_people(seq, camera, fps, cfg)
+    tracks = stitch(tracks, fps, cfg)
+    players = [interpolate(t, fps, cfg) for t in select_players(tracks, court, fps, cfg)]
+    return to_player_tracks(players, court, camera.image_size)
+
+
+def with_tracker(cfg: TrackingConfig, name: str) -> TrackingConfig:
+    return replace(cfg, tracker=name)

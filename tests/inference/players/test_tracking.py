@@ -1,0 +1,152 @@
+"""Players pipeline: court positions, tracking through the importer path, selection, teams, bad inputs."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inference.camera import Camera
+from inference.cli import main
+from inference.clipio import Clip
+from inference.court import load_court
+from inference.players import Persons, PoseSequence
+from inference.players.backends import BackendUnavailable, decode_movenet, make_backend
+from inference.players.evaluate import DetectionNoise, score, simulate_detections
+from inference.players.positions import court_positions, foot_points
+from inference.players.tracking import players_from_poses
+from inference.skeleton import JOINT
+
+SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
+W, H = 1280, 720
+
+
+@pytest.fixture(scope="module")
+def cam():
+    return Camera.from_look_at([5.0, -3.0, 6.0], [5.0, 9.5, 0.0], (W, H), fov_deg=80)
+
+
+def person_at(cam, x, y, height=1.8):
+    """(17, 2) keypoints of an upright person standing at (x, y): ankles at 0.08 m, knees, hips, head."""
+    z = {"ankle": 0.08, "knee": 0.5, "hip": 0.95, "shoulder": 1.45, "head": height - 0.1}
+    kp = np.full((17, 3), np.nan)
+    for side, dx in (("left", -0.12), ("right", 0.12)):
+        for part in ("ankle", "knee", "hip", "shoulder"):
+            kp[JOINT[f"{side}_{part}"]] = [x + dx, y, z[part]]
+    kp[JOINT["nose"]] = [x, y, z["head"]]
+    pts = cam.project(np.nan_to_num(kp))
+    pts[np.isnan(kp).any(axis=1)] = np.nan
+    return pts
+
+
+def test_court_position_from_ankles_and_from_legs(cam):
+    kp = np.stack([person_at(cam, 3.0, 5.0), person_at(cam, 7.5, 16.0)])
+    scores = np.where(np.isfinite(kp).all(axis=2), 0.9, 0.0)
+    np.testing.assert_allclose(court_positions(kp, scores, cam), [[3.0, 5.0], [7.5, 16.0]], atol=1e-6)
+    no_ankles = scores.copy()
+    no_ankles[:, [JOINT["left_ankle"], JOINT["right_ankle"]]] = 0.1  # below the confidence threshold
+    np.testing.assert_allclose(court_positions(kp, no_ankles, cam), [[3.0, 5.0], [7.5, 16.0]], atol=0.3)
+    nothing = np.zeros_like(scores)
+    assert np.isnan(court_positions(kp, nothing, cam)).all()
+
+
+def test_foot_above_the_horizon_is_unknown(cam):
+    kp = np.full((1, 17, 2), np.nan)
+    kp[0, [JOINT["left_ankle"], JOINT["right_ankle"]]] = [[640, 5], [650, 5]]  # near the top: sky
+    sky = Camera.from_look_at([5.0, -3.0, 6.0], [5.0, 9.5, 8.0], (W, H), fov_deg=80)  # looking up
+    assert np.isfinite(foot_points(kp, np.ones((1, 17)))).all()
+    assert np.isnan(court_positions(kp, np.ones((1, 17)), sky)).all()
+
+
+@pytest.fixture(scope="module")
+def padel():
+    return Clip(SAMPLE / "padel_sample")
+
+
+def run_pipeline(clip, noise=DetectionNoise(), seed=0, tmp=None):
+    gt = clip.read_players(gt=True)
+    cam = clip.read_camera(gt=True)
+    seq = simulate_detections(gt, clip.n_frames, cam.image_size, np.random.default_rng(seed), noise)
+    if tmp is not None:  # through the importer path, as MMPose JSON
+        from inference.players.importers import load_predictions, write_mmpose_json
+
+        write_mmpose_json(tmp / "preds.json", seq)
+        seq = load_predictions(tmp / "preds.json", n_frames=clip.n_frames)
+    pred = players_from_poses(seq, cam, load_court(clip.court_path()), clip.info.fps)
+    return pred, gt
+
+
+def test_tracking_keeps_identities_and_positions(padel, tmp_path):
+    pred, gt = run_pipeline(padel, tmp=tmp_path)
+    s = score(pred, gt, padel.info.fps)
+    assert pred.ids() == [0, 1, 2, 3]
+    assert s.switches == 0 and s.median_error_m <= 0.15 and s.coverage > 0.9
+    teams = {pid: pred.of_player(pid).team[0] for pid in pred.ids()}
+    assert teams == {0: "near", 1: "near", 2: "far", 3: "far"}
+
+
+def test_spectators_and_extra_candidates_are_not_players(padel):
+    noise = DetectionNoise(spectators=6)
+    pred, gt = run_pipeline(padel, noise, seed=1)
+    assert len(pred.ids()) == 4
+    assert np.all(np.abs(np.nanmedian(pred.court_xy, axis=0)) < 25)
+    for pid in pred.ids():
+        xy = np.nanmedian(pred.of_player(pid).court_xy, axis=0)
+        assert -1.5 <= xy[0] <= 11.5 and -1.5 <= xy[1] <= 21.5
+
+
+def test_empty_frames_give_no_players(padel):
+    seq = PoseSequence([Persons.empty() for _ in range(30)])
+    pred = players_from_poses(seq, padel.read_camera(gt=True), load_court("padel"), 30.0)
+    assert len(pred) == 0
+
+
+def test_keypoints_outside_the_frame_are_tolerated(cam):
+    frames = []
+    for f in range(40):
+        kp = person_at(cam, 2.0 + 0.05 * f, 4.0)[None]
+        kp[0, JOINT["nose"]] = [-50.0, -80.0]  # a joint predicted outside the image
+        frames.append(Persons(np.full((1, 4), np.nan), kp, np.full((1, 17), 0.9), np.array([0.9])))
+    pred = players_from_poses(PoseSequence(frames), cam, load_court("padel"), 30.0)
+    assert pred.ids() == [0]
+    np.testing.assert_allclose(pred.court_xy[-1], [2.0 + 0.05 * 39, 4.0], atol=0.05)
+
+
+def test_backend_errors_name_what_is_missing(tmp_path):
+    with pytest.raises(BackendUnavailable, match="--predictions"):
+        make_backend("import")
+    ok, reason = make_backend("rtmpose", pose_model=tmp_path / "p.onnx", det_model=tmp_path / "d.onnx").available()
+    assert not ok and ("onnxruntime" in reason or "p.onnx" in reason)
+    ok, reason = make_backend("movenet", model=tmp_path / "m.tflite").available()
+    assert not ok and ("ai-edge-litert" in reason or "m.tflite" in reason)
+    with pytest.raises(ValueError, match="unknown pose backend"):
+        make_backend("openpifpaf")
+
+
+def test_decode_movenet_output():
+    raw = np.zeros((6, 56))
+    raw[0, :51] = np.tile([0.5, 0.25, 0.9], 17)          # every joint at (y=0.5, x=0.25) of the canvas
+    raw[0, 51:56] = [0.4, 0.2, 0.6, 0.3, 0.8]            # box and score
+    p = decode_movenet(raw, (288, 512), scale=0.4)
+    assert len(p) == 1
+    np.testing.assert_allclose(p.keypoints[0, 0], [0.25 * 512 / 0.4, 0.5 * 288 / 0.4])
+    np.testing.assert_allclose(p.boxes[0], [0.2 * 512 / 0.4, 0.4 * 288 / 0.4, 0.3 * 512 / 0.4, 0.6 * 288 / 0.4])
+
+
+def test_cli_players(tmp_path, padel, capsys):
+    from inference.players.importers import write_mmpose_json
+
+    clip_dir = tmp_path / "clip"
+    shutil.copytree(SAMPLE / "padel_sample", clip_dir)
+    shutil.copy(clip_dir / "gt" / "camera.yaml", clip_dir / "camera.yaml")
+    gt = padel.read_players(gt=True)
+    seq = simulate_detections(gt, padel.n_frames, (W, H), np.random.default_rng(2))
+    write_mmpose_json(tmp_path / "preds.json", seq)
+    assert main(["players", str(clip_dir), "--pose", "import", "--predictions", str(tmp_path / "preds.json")]) == 0
+    assert "4 players" in capsys.readouterr().out
+    assert Clip(clip_dir).read_players().ids() == [0, 1, 2, 3]
+    assert main(["players", str(clip_dir), "--pose", "rtmpose", "--pose-model", str(tmp_path / "x.onnx"),
+                 "--det-model", str(tmp_path / "y.onnx")]) == 1
+    err = capsys.readouterr().err
+    assert "rtmpose" in err and ("onnxruntime" in err or "x.onnx" in err)
