@@ -23,6 +23,7 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PIP) install -q --disable-pip-version-check torch==2.13.0
 	$(PIP) install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
 	$(PIP) install -q --disable-pip-version-check --no-deps trackers==2.6.1
+	$(PY) -m inference.players.movenet_fetch
 	$(PY) -c "import torch, cv2; assert torch.__version__.startswith('2.13.0'), torch.__version__"
 	@! $(PIP) show -q opencv-python torchvision 2>/dev/null || { echo "opencv-python or torchvision got installed; only opencv-python-headless is allowed"; exit 1; }
 	touch $(STAMP)

@@ -69,10 +69,48 @@ def run(clips: list[Clip], noise: DetectionNoise, cfg: TrackingConfig) -> dict:
             "p90 m": np.percentile(e, 90), "coverage": covered / total, "fps": frames / seconds}
 
 
+def movenet_rows(clips: list[Clip]) -> None:
+    """The offline MoveNet backend end to end on rendered frames: detection recall of the true players
+    (a detection whose keypoints are within 20 px on average), keypoint error, frames/s, and the
+    pipeline's court-position error and identity switches."""
+    from inference.players.backends import MoveNetBackend
+    from inference.players.types import PoseSequence
+
+    backend = MoveNetBackend()
+    ok, reason = backend.available()
+    if not ok:
+        print(f"MoveNet unavailable: {reason}")
+        return
+    print("\n| clip | players found | keypoint error px (median) | pose frames/s | court error m (median) "
+          "| ID switches / player / min |")
+    print("|---|---|---|---|---|---|")
+    for clip in clips:
+        gt = clip.read_players(gt=True)
+        cam = clip.read_camera(gt=True)
+        wh = np.array([clip.info.width, clip.info.height], float)
+        t0 = time.perf_counter()
+        poses = backend.run(clip)
+        fps = clip.n_frames / (time.perf_counter() - t0)
+        found, total, errs = 0, 0, []
+        for f, persons in enumerate(poses.frames):
+            for g in gt.keypoints[gt.frame == f, :, :2] * wh:
+                total += 1
+                if len(persons):
+                    d = np.nanmean(np.linalg.norm(persons.keypoints - g[None], axis=2), axis=1).min()
+                    if d < 20:
+                        found += 1
+                        errs.append(d)
+        pred = players_from_poses(PoseSequence(poses.frames), cam, load_court(clip.court_path()), clip.info.fps)
+        s = score(pred, gt, clip.info.fps)
+        print(f"| {clip.root.name} | {found / max(total, 1) * 100:.0f}% | {np.median(errs):.1f} | {fps:.1f} | "
+              f"{s.median_error_m:.3f} | {s.switches_per_player_minute:.2f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--clips", type=int, default=4)
     ap.add_argument("--data", type=Path, default=Path("runs/bench_players"))
+    ap.add_argument("--movenet-clips", type=int, default=1, help="clips per sport for the MoveNet rows")
     args = ap.parse_args()
     settings = [("keypoints σ 3 px, 5 % dropped, occlusion runs, 3 spectators", DetectionNoise()),
                 ("keypoints σ 6 px, 10 % dropped, occlusion runs, 6 spectators",
@@ -87,6 +125,7 @@ def main() -> None:
                 print(f"| {sport} | {label} | {tracker} | {r['switches/player/min']:.2f} | {r['median m']:.3f} | "
                       f"{r['mean m']:.3f} | {r['p90 m']:.3f} | {r['coverage'] * 100:.0f}% | {r['fps']:.0f} |",
                       flush=True)
+    movenet_rows([c for sport in ("padel", "tennis") for c in dataset(args.data, sport, args.clips)[:args.movenet_clips]])
 
 
 if __name__ == "__main__":

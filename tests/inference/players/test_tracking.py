@@ -150,3 +150,23 @@ def test_cli_players(tmp_path, padel, capsys):
                  "--det-model", str(tmp_path / "y.onnx")]) == 1
     err = capsys.readouterr().err
     assert "rtmpose" in err and ("onnxruntime" in err or "x.onnx" in err)
+
+
+def test_movenet_backend_on_rendered_players():
+    """The offline default backend (installed by make) finds the rendered tennis players."""
+    from inference.players.backends import MoveNetBackend
+
+    backend = MoveNetBackend()
+    ok, reason = backend.available()
+    if not ok:
+        pytest.skip(reason)
+    clip = Clip(SAMPLE / "tennis_sample")
+    gt = clip.read_players(gt=True)
+    frames = clip.frames()
+    errors = []
+    for f in (0, 40, 80):
+        persons = backend.infer(frames[f])
+        assert (persons.scores > 0.2).sum() >= 2
+        for g in gt.keypoints[gt.frame == f, :, :2] * [clip.info.width, clip.info.height]:
+            errors.append(np.nanmean(np.linalg.norm(persons.keypoints - g[None], axis=2), axis=1).min())
+    assert np.median(errors) < 15.0
