@@ -89,7 +89,7 @@ def movenet_rows(clips: list[Clip]) -> None:
         cam = clip.read_camera(gt=True)
         wh = np.array([clip.info.width, clip.info.height], float)
         t0 = time.perf_counter()
-        poses = backend.run(clip)
+        poses = backend.run(clip, progress=False)
         fps = clip.n_frames / (time.perf_counter() - t0)
         found, total, errs = 0, 0, []
         for f, persons in enumerate(poses.frames):

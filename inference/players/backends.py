@@ -40,7 +40,7 @@ class ImportBackend:
             return False, f"predictions file {self.path} not found; pass --predictions FILE"
         return True, ""
 
-    def run(self, clip) -> PoseSequence:
+    def run(self, clip, progress: bool = True) -> PoseSequence:
         from .importers import load_predictions
 
         return load_predictions(self.path, n_frames=clip.n_frames, fmt=self.fmt,
@@ -66,7 +66,7 @@ class _FrameBackend:
     def infer(self, image: np.ndarray) -> Persons:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def run(self, clip) -> PoseSequence:
+    def run(self, clip, progress: bool = True) -> PoseSequence:
         ok, reason = self.available()
         if not ok:
             raise BackendUnavailable(f"pose backend {self.name!r} is unavailable: {reason}")
@@ -74,7 +74,7 @@ class _FrameBackend:
 
         with clip.frames() as frames:
             out = [self.infer(img) for img in tqdm(_iterate(frames), total=len(frames), desc=f"pose {self.name}",
-                                                   unit="frame")]
+                                                   unit="frame", disable=not progress)]
         return PoseSequence(out, self.name)
 
 

@@ -7,7 +7,8 @@
 3. **Selection** as in the thesis: time on court plus distance travelled, the best ``n/2`` per court
    side (spectators, umpires and ball kids stand off court or still).
 4. **Teams** by court side (near: y < net), ids 0..n-1 near team first, left to right.
-5. **Gaps** up to ``max_gap_s`` are filled by linear interpolation.
+5. **Gaps** up to ``max_gap_s`` are filled by linear interpolation, and court positions are smoothed
+   with a short centred moving average (players move slowly; keypoint noise does not).
 
 Example:
     >>> tracks = players_from_poses(poses, camera, court, fps=30.0)      # PlayerTracks (players.csv)
@@ -33,13 +34,15 @@ class TrackingConfig:
     """Knobs of the player pipeline."""
 
     tracker: str = "ocsort"
-    min_person_score: float = 0.2     # detections below are dropped before tracking
+    min_person_score: float = 0.1     # detections below are dropped before tracking
+    activation: float = 0.5           # tracks start from detections this confident (after normalisation)
     lost_buffer_s: float = 1.0        # the tracker keeps a lost track this long
     min_consecutive: int = 2          # frames before a track is confirmed
     iou_threshold: float = 0.1        # small far-court boxes overlap little between frames
     stitch_gap_s: float = 3.0         # fragments this far apart in time may be joined ...
     max_speed: float = 8.0            # ... if a player could run between them (m/s)
     max_gap_s: float = 0.6            # gaps filled by interpolation
+    smooth_s: float = 0.2             # court positions: centred moving average over this window
     court_margin: float = 1.5         # m beyond the court's lines that still count as "on court"
     distance_weight: float = 0.3      # selection score = seconds on court + weight × metres travelled
     ankle_height: float = ANKLE_HEIGHT
@@ -77,9 +80,19 @@ def _make_tracker(cfg: TrackingConfig, fps: float):
     buffer = max(1, int(round(cfg.lost_buffer_s * fps)))
     common = dict(lost_track_buffer=buffer, frame_rate=fps, minimum_consecutive_frames=cfg.min_consecutive,
                   minimum_iou_threshold=cfg.iou_threshold)
-    cls = {"ocsort": trackers.OCSORTTracker, "bytetrack": trackers.ByteTrackTracker,
-           "sort": trackers.SORTTracker}[cfg.tracker]
-    return cls(**common)
+    if cfg.tracker == "ocsort":
+        return trackers.OCSORTTracker(high_conf_det_threshold=cfg.activation, **common)
+    if cfg.tracker == "bytetrack":
+        return trackers.ByteTrackTracker(track_activation_threshold=cfg.activation,
+                                         high_conf_det_threshold=cfg.activation, **common)
+    return trackers.SORTTracker(track_activation_threshold=cfg.activation * 0.5, **common)
+
+
+def confidence_scale(seq: PoseSequence) -> float:
+    """The 90th percentile of the clip's person scores: pose models differ in score scale (MoveNet's are
+    often 0.2–0.5, RTMPose's box scores 0.5–0.9), so scores are divided by it before tracking."""
+    scores = np.concatenate([p.scores for p in seq.frames if len(p)] or [np.ones(1)])
+    return float(max(np.percentile(scores, 90), 1e-6))
 
 
 def track_people(seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingConfig) -> list[Track]:
@@ -87,12 +100,14 @@ def track_people(seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingCon
     import supervision as sv
 
     tracker = _make_tracker(cfg, fps)
+    scale = confidence_scale(seq)
     rows: dict[int, list] = {}
     for f, persons in enumerate(seq.frames):
         keep = persons.scores >= cfg.min_person_score
         keep &= np.isfinite(persons.boxes).all(axis=1) & (persons.boxes[:, 2] > persons.boxes[:, 0])
         p = persons.select(keep)
-        det = sv.Detections(xyxy=p.boxes.astype(np.float32), confidence=p.scores.astype(np.float32),
+        conf = np.clip(p.scores / scale, 0.0, 1.0).astype(np.float32)
+        det = sv.Detections(xyxy=p.boxes.astype(np.float32), confidence=conf,
                             class_id=np.zeros(len(p), int), data={"idx": np.arange(len(p))})
         out = tracker.update(det)
         if len(out) == 0:
@@ -204,6 +219,25 @@ def interpolate(t: Track, fps: float, cfg: TrackingConfig) -> Track:
     return Track(frames, interp(t.boxes), interp(t.keypoints), kp_scores, scores, interp(t.court))
 
 
+def smooth_court(t: Track, fps: float, cfg: TrackingConfig) -> Track:
+    """Centred moving average of the court positions over ``smooth_s`` (NaN-aware, frames contiguous)."""
+    half = int(round(cfg.smooth_s * fps / 2))
+    if half < 1 or len(t) < 3:
+        return t
+    xy = t.court
+    ok = np.isfinite(xy).all(axis=1)
+    n = len(xy)
+    i = np.arange(n)
+    h = np.minimum(half, np.minimum(i, n - 1 - i))  # symmetric windows, narrower at the ends: no lag
+    csum = np.concatenate([np.zeros((1, 2)), np.cumsum(np.where(ok[:, None], xy, 0.0), axis=0)])
+    ccount = np.concatenate([[0.0], np.cumsum(ok)])
+    num = csum[i + h + 1] - csum[i - h]
+    den = (ccount[i + h + 1] - ccount[i - h])[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        smooth = np.where(den > 0, num / den, np.nan)
+    return replace(t, court=np.where(ok[:, None], smooth, np.nan))
+
+
 def to_player_tracks(players: list[Track], court: Court, image_size: tuple[int, int]) -> PlayerTracks:
     """players.csv rows: ids in list order, team by side, normalised boxes and keypoints."""
     wh = np.asarray(image_size, float)
@@ -228,7 +262,7 @@ def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: flo
     cfg = config or TrackingConfig()
     tracks = track_people(seq, camera, fps, cfg)
     tracks = stitch(tracks, fps, cfg)
-    players = [interpolate(t, fps, cfg) for t in select_players(tracks, court, fps, cfg)]
+    players = [smooth_court(interpolate(t, fps, cfg), fps, cfg) for t in select_players(tracks, court, fps, cfg)]
     return to_player_tracks(players, court, camera.image_size)
 
 
