@@ -102,7 +102,7 @@ def movenet_rows(clips: list[Clip]) -> None:
                         errs.append(d)
         pred = players_from_poses(PoseSequence(poses.frames), cam, load_court(clip.court_path()), clip.info.fps)
         s = score(pred, gt, clip.info.fps)
-        print(f"| {clip.root.name} | {found / max(total, 1) * 100:.0f}% | {np.median(errs):.1f} | {fps:.1f} | "
+        print(f"| {clip.root.parent.name}/{clip.root.name} | {found / max(total, 1) * 100:.0f}% | {np.median(errs):.1f} | {fps:.1f} | "
               f"{s.median_error_m:.3f} | {s.switches_per_player_minute:.2f} |", flush=True)
 
 
