@@ -58,6 +58,10 @@ def read_checkpoint(path: str | os.PathLike, *, allow_pickle: bool = True) -> An
     except Exception as err:  # noqa: BLE001 - torch raises KeyError, RuntimeError, EOFError... on a bad file
         raise ValueError(f"cannot read {p} as a PyTorch checkpoint: {type(err).__name__}: {err}") from err
     objects = _unsafe_globals(p)
+    with p.open("rb") as f:
+        magic = f.read(2)
+    if not objects and magic not in (b"PK", b"\x80\x02"):  # neither torch's zip format nor a legacy pickle
+        raise ValueError(f"cannot read {p} as a PyTorch checkpoint: {safe_error}")
     what = f"pickled Python objects ({', '.join(objects)})" if objects else "objects that weights_only=True refuses"
     if not allow_pickle:
         raise ValueError(f"{p} holds {what}; refusing to unpickle it (allow_pickle=False): {safe_error}")

@@ -191,3 +191,6 @@ def test_unreadable_file(tmp_path):
     path.write_text("not a checkpoint")
     with pytest.raises(ValueError, match="cannot read"):
         load_weights(WASB(), path)
+    path.write_bytes(b"\x80\x02truncated")  # a truncated legacy pickle
+    with pytest.raises(ValueError, match="cannot read"):
+        load_weights(WASB(), path)
