@@ -1,0 +1,110 @@
+"""Every experiment composes and runs one fast_dev_run step on CPU on a tiny generated dataset; resume
+and pretrained fine-tuning work; bad data gives clear errors."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import open_dict
+
+from training.run import evaluate, train
+from training.synth.generate import SynthConfig, generate_dataset
+
+ROOT = Path(__file__).resolve().parents[3]
+EXPERIMENTS = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("*.yaml") if not p.stem.startswith("hitnet"))
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """Three short synthetic clips per sport (a train, a val and a test split)."""
+    root = tmp_path_factory.mktemp("ballsets")
+    for sport in ("padel", "tennis"):
+        generate_dataset(root / f"synth_{sport}", 3, seed=5, config=SynthConfig(
+            sport=sport, randomise_camera=False, width=320, height=192, fps=30.0, codec="mp4v",
+            randomise_look=False, max_frames=40))
+    return root
+
+
+def compose_cfg(overrides: list[str], tmp_path: Path, name: str = "train"):
+    GlobalHydra.instance().clear()
+    os.environ.setdefault("PROJECT_ROOT", str(ROOT))
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose(config_name=name, return_hydra_config=True, overrides=overrides)
+    with open_dict(cfg):
+        cfg.paths.output_dir = str(tmp_path)
+        cfg.paths.log_dir = str(tmp_path)
+        cfg.hydra.runtime.output_dir = str(tmp_path)
+    HydraConfig().set_config(cfg)
+    return cfg
+
+
+def small(tiny: Path, sport: str) -> list[str]:
+    return [f"data.root={tiny}/synth_{sport}", "data.net_size=[64,112]", "data.crop=[32,32]", "data.batch_size=2",
+            "trainer.accelerator=cpu", f"data.cache_dir={tiny}/.cache"]
+
+
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_experiment_fast_dev_run(experiment, tiny, tmp_path):
+    sport = experiment.split("_")[-1]
+    cfg = compose_cfg([f"+experiment={experiment}", "trainer.fast_dev_run=true", *small(tiny, sport)], tmp_path)
+    assert cfg.model.net.name == experiment.split("_")[0]
+    metrics = train(cfg)
+    assert "train/loss" in metrics or "train/loss_step" in metrics
+    assert torch.isfinite(torch.tensor(metrics.get("train/loss", metrics.get("train/loss_step"))))
+
+
+def test_train_checkpoint_resume_and_eval(tiny, tmp_path):
+    base = ["+experiment=wasb_padel", "trainer.max_epochs=1", "trainer.limit_train_batches=2",
+            "trainer.limit_val_batches=1", "trainer.limit_test_batches=1", *small(tiny, "padel")]
+    cfg = compose_cfg(base, tmp_path)
+    metrics = train(cfg)
+    assert "val/f1" in metrics and "test/f1" in metrics
+    last = tmp_path / "checkpoints" / "last.ckpt"
+    assert last.is_file()
+    resumed = compose_cfg([*base, "trainer.max_epochs=2", f"ckpt_path={last}", "test=false"], tmp_path / "r")
+    train(resumed)
+    state = torch.load(tmp_path / "r" / "checkpoints" / "last.ckpt", map_location="cpu", weights_only=False)
+    assert state["epoch"] == 1
+    ev = compose_cfg(["+experiment=wasb_padel", f"ckpt_path={last}", *small(tiny, "padel"),
+                      "trainer.limit_test_batches=1"], tmp_path / "e", name="eval")
+    assert "test/f1" in evaluate(ev)
+
+
+def test_pretrained_public_checkpoint_fine_tunes(tiny, tmp_path):
+    from inference.models.checkpoint import save_wasb_checkpoint
+    from inference.models.registry import build_model
+
+    path = tmp_path / "wasb_tennis_best.pth.tar"
+    save_wasb_checkpoint(build_model("wasb"), path)
+    cfg = compose_cfg(["+experiment=wasb_padel", "trainer.fast_dev_run=true", f"model.pretrained={path}",
+                       *small(tiny, "padel")], tmp_path)
+    train(cfg)
+
+
+def test_missing_dataset_is_a_clear_error(tmp_path):
+    cfg = compose_cfg(["+experiment=wasb_padel", "trainer.fast_dev_run=true", f"data.root={tmp_path}/nothing"],
+                      tmp_path)
+    with pytest.raises(FileNotFoundError, match="rally3d synth"):
+        train(cfg)
+
+
+def test_eval_needs_a_checkpoint(tmp_path):
+    cfg = compose_cfg(["+experiment=wasb_padel"], tmp_path, name="eval")
+    with pytest.raises(ValueError, match="ckpt_path"):
+        evaluate(cfg)
+
+
+def test_plus_experiment_spelling_from_the_command_line(tiny, tmp_path):
+    """`python train.py +experiment=wasb_padel` composes (the style.md pitfall)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, str(ROOT / "train.py"), "+experiment=wasb_padel", "--cfg", "job",
+                          "--resolve"], capture_output=True, text=True, env={**os.environ, "PROJECT_ROOT": str(ROOT)})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "name: wasb" in out.stdout and "synth_padel" in out.stdout

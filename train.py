@@ -1,0 +1,20 @@
+"""Train a model: ``python train.py +experiment=wasb_padel`` (configs in conf/, see conf/train.yaml)."""
+import os
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig
+
+os.environ.setdefault("PROJECT_ROOT", str(Path(__file__).resolve().parent))
+
+
+@hydra.main(version_base="1.3", config_path="conf", config_name="train")
+def main(cfg: DictConfig) -> float | None:
+    from training.run import train
+
+    metrics = train(cfg)
+    return metrics.get("val/f1")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,116 @@
+"""The LightningModule that trains a ball detector (TrackNetV2, MonoTrack or WASB) on heatmaps.
+
+Validation decodes each output heatmap like inference does (threshold, connected components, the
+best-scoring blob), maps it back to original-frame pixels and counts TP/FP1/FP2/FN/TN at ``tau_px``
+(original pixels); ``val/f1`` chooses the best checkpoint.
+
+Example (what Hydra instantiates from conf/model/*.yaml):
+    >>> module = BallDetector(net=build_model("wasb"), loss=HeatmapLoss("wbce"),
+    ...                       optimizer=partial(torch.optim.Adam, lr=1e-3))
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import lightning as L
+import numpy as np
+import torch
+from torch import nn
+
+from inference.detection.metrics import evaluate_detections
+from inference.detection.postprocess import heatmap_to_candidates
+from inference.models.checkpoint import load_weights
+
+
+class BallDetector(L.LightningModule):
+    """Heatmap training of a detector network.
+
+    Args:
+        net: maps (B, 3·F_in, H, W) to (B, F_out, H, W) logits.
+        loss: heatmap loss on logits (training/detection/losses.py).
+        optimizer: a partial taking the parameters; scheduler: a partial taking the optimizer (or None).
+        pretrained: a checkpoint to start from (WASB-SBDT public format or ours); never downloaded.
+        tau_px: validation distance threshold in original-frame pixels.
+        threshold: heatmap probability threshold of the blob detection.
+    """
+
+    def __init__(self, net: nn.Module, loss: nn.Module, optimizer: Callable, scheduler: Callable | None = None,
+                 pretrained: str | None = None, tau_px: float = 10.0, threshold: float = 0.5,
+                 compile: bool = False):
+        super().__init__()
+        # factories are kept as attributes, not hyperparameters: checkpoints stay loadable with weights_only
+        self.save_hyperparameters(logger=False, ignore=["net", "loss", "optimizer", "scheduler"])
+        self.optimizer_factory, self.scheduler_factory = optimizer, scheduler
+        self.net = net
+        self.loss_fn = loss
+        if pretrained:
+            load_weights(self.net, pretrained)
+        self.outputs: dict[str, list[tuple]] = {"val": [], "test": []}
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+    def training_step(self, batch, batch_idx):
+        x, y, _ = batch
+        loss = self.loss_fn(self(x), y)
+        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(x))
+        return loss
+
+    def _eval_step(self, batch, split: str):
+        x, y, meta = batch
+        logits = self(x)
+        loss = self.loss_fn(logits, y)
+        self.log(f"{split}/loss", loss, prog_bar=True, on_epoch=True, batch_size=len(x))
+        probs = torch.sigmoid(logits).float().cpu().numpy()
+        self._count(probs, meta, split)
+
+    def validation_step(self, batch, batch_idx):
+        self._eval_step(batch, "val")
+
+    def test_step(self, batch, batch_idx):
+        self._eval_step(batch, "test")
+
+    def _count(self, probs: np.ndarray, meta: dict, split: str) -> None:
+        """Decode each heatmap to at most one ball and compare with the truth in original pixels."""
+        B, Fo = probs.shape[:2]
+        scale = meta["lb_scale"].numpy()
+        pad = meta["lb_pad"].numpy()
+        offset = meta["offset"].numpy()
+        vis = meta["visibility"].numpy()
+        gt = meta["xy_px"].numpy()
+        pred_vis = np.zeros((B, Fo), bool)
+        pred_xy = np.full((B, Fo, 2), np.nan)
+        score = np.zeros((B, Fo))
+        for b in range(B):
+            for f in range(Fo):
+                cand = heatmap_to_candidates(probs[b, f], threshold=self.hparams.threshold)
+                if len(cand.score):
+                    k = int(np.argmax(cand.score))
+                    pred_vis[b, f] = True
+                    pred_xy[b, f] = (cand.xy[k] + offset[b] - pad[b]) / scale[b]
+                    score[b, f] = cand.score[k]
+        self.outputs[split].append((pred_vis.ravel(), pred_xy.reshape(-1, 2), score.ravel(), vis.ravel(),
+                                    gt.reshape(-1, 2)))
+
+    def _log_counts(self, split: str) -> None:
+        if not self.outputs[split]:
+            return
+        parts = [np.concatenate(a) for a in zip(*self.outputs[split])]
+        report = evaluate_detections(*parts, tau_px=self.hparams.tau_px)
+        for name in ("precision", "recall", "f1", "accuracy", "ap", "rmse_px"):
+            value = report.as_dict()[name]
+            self.log(f"{split}/{name}", float(value) if value == value else 0.0, prog_bar=name == "f1")
+        self.outputs[split] = []
+
+    def on_validation_epoch_end(self) -> None:
+        self._log_counts("val")
+
+    def on_test_epoch_end(self) -> None:
+        self._log_counts("test")
+
+    def configure_optimizers(self):
+        opt = self.optimizer_factory(params=self.parameters())
+        if self.scheduler_factory is None:
+            return opt
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": self.scheduler_factory(optimizer=opt),
+                                                   "interval": "epoch"}}
