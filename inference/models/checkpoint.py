@@ -4,7 +4,7 @@ Accepted by :func:`load_weights`:
 
 - a raw ``state_dict`` (a mapping of names to tensors), as a mapping or a file;
 - a WASB-SBDT checkpoint ``{'model_state_dict': ..., 'epoch': ..., ...}`` (``*_best.pth.tar``);
-- a Lightning checkpoint ``{'state_dict': {'model.xxx': ...}, ...}``: the ``model.`` prefix is stripped and
+- a Lightning checkpoint ``{'state_dict': {'model.xxx' or 'net.xxx': ...}, ...}``: that prefix is stripped and
   entries outside ``model.`` (a loss's buffers, say) are ignored;
 - any of these with ``module.`` (DataParallel / DistributedDataParallel) or ``_orig_mod.`` (torch.compile)
   prefixes on every key.
@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 #: Prefixes stripped when *every* key of a state_dict carries them (and the model's keys do not).
-WRAPPER_PREFIXES = ("module.", "_orig_mod.", "model.")
+WRAPPER_PREFIXES = ("module.", "_orig_mod.", "model.", "net.")  # net.: our BallDetector module
 
 
 def unwrap_model(model: nn.Module) -> nn.Module:

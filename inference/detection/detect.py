@@ -1,0 +1,143 @@
+"""Ball detection on a whole clip: stream frames → letterbox → batched N-frame windows through the
+network at full resolution → heatmap candidates in original pixels → online tracker → ball.csv rows.
+
+The video is streamed (never held in memory); windows are non-overlapping (``step = frames_out``) as in
+WASB-SBDT, or overlapping with candidates pooled per frame (``step = 1``).
+
+Example:
+    >>> det = BallDetectorRunner.from_weights("wasb", SHIPPED)           # the shipped padel weights
+    >>> result = det.run(Clip("clip"))                                   # DetectionResult
+    >>> clip.write_ball(result.track)
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from inference.clipio import BallTrack, Clip
+from inference.models.checkpoint import load_weights
+from inference.models.registry import build_model
+
+from .geometry import Letterbox
+from .postprocess import FrameCandidates, PostprocessConfig, heatmaps_to_candidates, pool_candidates
+from .tracker import TrackerConfig, TrackResult, track_candidates
+
+IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
+IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
+#: Input normalisation each published model was trained with.
+NORMALIZATION = {"wasb": "imagenet", "tracknetv2": "unit", "monotrack": "unit"}
+WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
+SHIPPED = {"wasb": WEIGHTS_DIR / "wasb_padel.pth.tar"}
+
+
+@dataclass
+class DetectionResult:
+    """Per-frame candidates, the tracked ball and timing of one clip."""
+
+    candidates: list[FrameCandidates]
+    tracked: TrackResult
+    track: BallTrack
+    seconds_network: float
+    seconds_total: float
+    n_frames: int
+
+    @property
+    def fps(self) -> float:
+        return self.n_frames / self.seconds_total if self.seconds_total else float("nan")
+
+
+@dataclass
+class BallDetectorRunner:
+    """A detector network with its pre/post-processing.
+
+    Args:
+        model: maps (B, 3·F, H, W) to (B, F, H, W) logits.
+        frames_in: F; net_size: (H, W); normalize: ``imagenet`` or ``unit``.
+        step: window step in frames (``frames_in``: non-overlapping; 1: pooled overlapping windows).
+        batch_size: windows per forward pass.
+    """
+
+    model: torch.nn.Module
+    frames_in: int = 3
+    net_size: tuple[int, int] = (288, 512)
+    normalize: str = "imagenet"
+    step: int = 3
+    batch_size: int = 4
+    postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    device: str = "cpu"
+
+    @classmethod
+    def from_weights(cls, name: str = "wasb", weights: str | Path | None = None, **kw) -> BallDetectorRunner:
+        """Build ``name`` and load ``weights`` (default: the shipped weights of that model)."""
+        weights = weights or SHIPPED.get(name)
+        if weights is None:
+            raise FileNotFoundError(f"no shipped weights for {name!r}; pass the path of a checkpoint "
+                                    "(weights are never downloaded)")
+        model = build_model(name)
+        load_weights(model, weights)
+        return cls(model.eval(), normalize=NORMALIZATION.get(name, "imagenet"), **kw)
+
+    def _tensor(self, frames: list[np.ndarray]) -> torch.Tensor:
+        x = np.stack(frames).astype(np.float32) / 255.0                     # (F, H, W, 3)
+        if self.normalize == "imagenet":
+            x = (x - IMAGENET_MEAN) / IMAGENET_STD
+        return torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2).reshape(-1, *x.shape[1:3])))
+
+    def heatmaps(self, frames) -> tuple[dict[int, list[np.ndarray]], float]:
+        """Run the network over letterboxed frames; frame index → its probability maps (one per window)."""
+        maps: dict[int, list[np.ndarray]] = {}
+        window: deque = deque(maxlen=self.frames_in)
+        batch, starts = [], []
+        seconds = 0.0
+
+        def flush():
+            nonlocal seconds
+            t0 = time.perf_counter()
+            with torch.inference_mode():
+                probs = torch.sigmoid(self.model(torch.stack(batch).to(self.device))).float().cpu().numpy()
+            seconds += time.perf_counter() - t0
+            for s, p in zip(starts, probs):
+                for k in range(p.shape[0]):
+                    maps.setdefault(s + self.frames_in - p.shape[0] + k, []).append(p[k])
+            batch.clear()
+            starts.clear()
+
+        last_start = -self.step
+        for i, frame in enumerate(frames):
+            window.append(frame)
+            start = i - self.frames_in + 1
+            if len(window) == self.frames_in and start - last_start >= self.step:
+                batch.append(self._tensor(list(window)))
+                starts.append(start)
+                last_start = start
+                if len(batch) == self.batch_size:
+                    flush()
+        if batch:
+            flush()
+        return maps, seconds
+
+    def run(self, clip: Clip, progress: bool = False) -> DetectionResult:
+        """Detect and track the ball over the whole clip (original-frame pixels)."""
+        from tqdm import tqdm
+
+        t0 = time.perf_counter()
+        info = clip.info
+        lb = Letterbox(info.width, info.height, self.net_size[1], self.net_size[0])
+        with clip.frames(cache_size=0) as src:
+            n = len(src)
+            frames = (lb.warp(f) for f in tqdm(src.iter(), total=n, desc=f"detect {clip.root.name}",
+                                               unit="frame", disable=not progress))
+            maps, seconds_net = self.heatmaps(frames)
+        candidates = []
+        for i in range(n):
+            per_window = [heatmaps_to_candidates(m[None], lb, self.postprocess)[0] for m in maps.get(i, [])]
+            candidates.append(pool_candidates(per_window) if per_window else FrameCandidates.empty())
+        tracked = track_candidates(candidates, info.fps, self.tracker, (info.width, info.height))
+        track = tracked.to_ball_track(info.width, info.height)
+        return DetectionResult(candidates, tracked, track, seconds_net, time.perf_counter() - t0, n)
