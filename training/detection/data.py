@@ -4,7 +4,8 @@
 * Frames are resized once, aspect-preserving (letterbox), to the network size and cached as ``uint8``
   arrays on disk, so epochs after the first never decode video again (``cache_dir``).
 * Targets: a binary disk of ``radius`` px (net resolution) around the ball of each output frame whose
-  visibility is in ``visible_flags``; all-zero maps otherwise.
+  visibility is in ``visible_flags``; real-valued maps for the hard frames of ``soft_flags`` (e.g. [2]);
+  all-zero maps otherwise.
 * CPU-friendly training: random ``crop`` windows (a multiple of 8), centred near the ball with
   probability ``ball_crop_prob`` and anywhere otherwise (background crops teach what is *not* a ball).
 * Augmentation: horizontal flip, brightness/contrast jitter, scale-crop; the published normalisation
@@ -103,6 +104,7 @@ class WindowSpec:
     step: int = 1
     radius: float = 2.5
     visible_flags: tuple[int, ...] = (1, 2)
+    soft_flags: tuple[int, ...] = ()  # visibilities that get a real-valued (Gaussian) map instead of a disk
     crop: tuple[int, int] | None = None
     ball_crop_prob: float = 0.7
     normalize: str = "imagenet"
@@ -165,6 +167,9 @@ class BallWindows(Dataset):
             gain, bias = rng.uniform(0.75, 1.25), rng.uniform(-20, 20)
             imgs = np.clip(imgs * gain + bias, 0, 255)
         heat = disk_heatmaps(centres, imgs.shape[1:3], spec.radius)
+        soft = np.isin(vis, spec.soft_flags) & shown
+        if soft.any():
+            heat[soft] = soft_heatmaps(centres[soft], imgs.shape[1:3], spec.radius)
         x = normalize(imgs, spec.normalize)
         meta = {"visibility": torch.as_tensor(vis), "xy_px": torch.as_tensor(cd.xy_px[out], dtype=torch.float32),
                 "offset": torch.tensor([x0, y0], dtype=torch.float32),
@@ -208,6 +213,19 @@ def disk_heatmaps(centres: np.ndarray, hw: tuple[int, int], radius: float) -> np
     return out
 
 
+def soft_heatmaps(centres: np.ndarray, hw: tuple[int, int], radius: float) -> np.ndarray:
+    """Real-valued maps for hard frames (WASB-SBDT's position-aware targets): 0.6·exp(-d²/r²)/e⁻¹,
+    zero below 0.5, clipped at 1."""
+    H, W = hw
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    out = np.zeros((len(centres), H, W), np.float32)
+    for k, (cx, cy) in enumerate(centres):
+        if np.isfinite(cx) and np.isfinite(cy):
+            m = 0.6 * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / radius**2) / np.exp(-1.0)
+            out[k] = np.where(m < 0.5, 0.0, np.minimum(m, 1.0))
+    return out
+
+
 def normalize(imgs: np.ndarray, mode: str) -> np.ndarray:
     """(F, H, W, 3) 0–255 → (3F, H, W) float32: ``imagenet`` mean/std or ``unit`` (/255)."""
     x = imgs / 255.0
@@ -231,7 +249,8 @@ class BallDataModule(L.LightningDataModule):
                  val_clips: list[str] | None = None, test_clips: list[str] | None = None,
                  net_size: tuple[int, int] = (288, 512), frames_in: int = 3, frames_out: int = 3,
                  crop: tuple[int, int] | None = None, ball_crop_prob: float = 0.7, radius: float = 2.5,
-                 visible_flags: tuple[int, ...] = (1, 2), normalize: str = "imagenet", augment: bool = True,
+                 visible_flags: tuple[int, ...] = (1, 2), soft_flags: tuple[int, ...] = (),
+                 normalize: str = "imagenet", augment: bool = True,
                  train_step: int = 1, batch_size: int = 8, num_workers: int = 0, cache_dir: str | None = None,
                  seed: int = 1234):
         super().__init__()
@@ -260,7 +279,8 @@ class BallDataModule(L.LightningDataModule):
             raise ValueError(f"the {split} split has no clips")
         train = split == "train"
         spec = WindowSpec(hp.frames_in, hp.frames_out, hp.train_step if train else hp.frames_out, hp.radius,
-                          tuple(hp.visible_flags), tuple(hp.crop) if (train and hp.crop) else None,
+                          tuple(hp.visible_flags), tuple(hp.soft_flags) if train else (),
+                          tuple(hp.crop) if (train and hp.crop) else None,
                           hp.ball_crop_prob, hp.normalize, bool(hp.augment and train))
         return BallWindows(clips, spec, hp.seed)
 

@@ -109,3 +109,35 @@ def test_plus_experiment_spelling_from_the_command_line(tiny, tmp_path):
                           "--resolve"], capture_output=True, text=True, env={**os.environ, "PROJECT_ROOT": str(ROOT)})
     assert out.returncode == 0, out.stderr[-2000:]
     assert "name: wasb" in out.stdout and "synth_padel" in out.stdout
+
+
+def test_clip_without_ball_csv_and_short_video_are_clear_errors(tiny, tmp_path):
+    import shutil
+
+    from inference.clipio import Clip, FormatError
+    from training.detection.data import load_clip
+
+    src = tiny / "synth_padel" / "clip_0000"
+    no_ball = tmp_path / "no_ball"
+    shutil.copytree(src, no_ball)
+    (no_ball / "ball.csv").unlink()
+    with pytest.raises(FormatError, match="ball.csv.*file not found"):
+        load_clip(Clip(no_ball), (64, 112), tmp_path / "cache")
+    short = tmp_path / "short"
+    shutil.copytree(src, short)
+    text = (short / "clip.yaml").read_text().replace("n_frames: 40", "n_frames: 55")
+    (short / "clip.yaml").write_text(text)
+    with pytest.raises(FormatError, match="video has 40 frames"):
+        load_clip(Clip(short), (64, 112), tmp_path / "cache")
+
+
+def test_targets_disks_and_soft_maps():
+    import numpy as np
+
+    from training.detection.data import disk_heatmaps, soft_heatmaps
+
+    centres = np.array([[10.0, 8.0], [np.nan, np.nan]])
+    disk = disk_heatmaps(centres, (20, 30), 2.5)
+    assert disk[0].sum() == 21 and disk[1].sum() == 0           # WASB's 21-pixel disk
+    soft = soft_heatmaps(centres[:1], (20, 30), 2.5)[0]
+    assert soft[8, 10] == 1.0 and 0 < soft[soft > 0].min() < 1.0 and soft.sum() < disk[0].sum() + 1
