@@ -40,6 +40,9 @@ demo: venv
 	rm -rf $(DEMO) && mkdir -p $(DEMO) && cp -r $(SAMPLE) $(DEMO)/
 	$(VENV)/bin/rally3d check $(DEMO)/padel_sample
 	$(VENV)/bin/rally3d calibrate $(DEMO)/padel_sample
+	$(VENV)/bin/rally3d players $(DEMO)/padel_sample --pose movenet
+	$(VENV)/bin/rally3d reconstruct $(DEMO)/padel_sample
+	$(VENV)/bin/rally3d eval-3d $(DEMO)/padel_sample --methods gravity,players,joint --noise 0 --camera clip --players clip
 
 sample: venv
 	$(PY) -m training.synth.sample datasets/sample

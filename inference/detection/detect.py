@@ -24,13 +24,10 @@ from inference.models.checkpoint import load_weights
 from inference.models.registry import build_model
 
 from .geometry import Letterbox
+from .preprocess import NORMALIZATION, normalize
 from .postprocess import FrameCandidates, PostprocessConfig, heatmaps_to_candidates, pool_candidates
 from .tracker import TrackerConfig, TrackResult, track_candidates
 
-IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
-IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
-#: Input normalisation each published model was trained with.
-NORMALIZATION = {"wasb": "imagenet", "tracknetv2": "unit", "monotrack": "unit"}
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 SHIPPED = {"wasb": WEIGHTS_DIR / "wasb_padel.pth.tar"}
 
@@ -84,10 +81,7 @@ class BallDetectorRunner:
         return cls(model.eval(), normalize=NORMALIZATION.get(name, "imagenet"), **kw)
 
     def _tensor(self, frames: list[np.ndarray]) -> torch.Tensor:
-        x = np.stack(frames).astype(np.float32) / 255.0                     # (F, H, W, 3)
-        if self.normalize == "imagenet":
-            x = (x - IMAGENET_MEAN) / IMAGENET_STD
-        return torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2).reshape(-1, *x.shape[1:3])))
+        return torch.from_numpy(normalize(np.stack(frames), self.normalize))
 
     def heatmaps(self, frames) -> tuple[dict[int, list[np.ndarray]], float]:
         """Run the network over letterboxed frames; frame index → its probability maps (one per window)."""

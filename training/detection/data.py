@@ -28,9 +28,8 @@ from torch.utils.data import DataLoader, Dataset
 
 from inference.clipio import Clip, FormatError, Manifest
 from inference.detection.geometry import Letterbox
+from inference.detection.preprocess import normalize
 
-IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
-IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
 
 
 @dataclass
@@ -224,16 +223,6 @@ def soft_heatmaps(centres: np.ndarray, hw: tuple[int, int], radius: float) -> np
             m = 0.6 * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / radius**2) / np.exp(-1.0)
             out[k] = np.where(m < 0.5, 0.0, np.minimum(m, 1.0))
     return out
-
-
-def normalize(imgs: np.ndarray, mode: str) -> np.ndarray:
-    """(F, H, W, 3) 0–255 → (3F, H, W) float32: ``imagenet`` mean/std or ``unit`` (/255)."""
-    x = imgs / 255.0
-    if mode == "imagenet":
-        x = (x - IMAGENET_MEAN) / IMAGENET_STD
-    elif mode != "unit":
-        raise ValueError(f"normalize must be 'imagenet' or 'unit', got {mode!r}")
-    return np.ascontiguousarray(x.transpose(0, 3, 1, 2).reshape(-1, *x.shape[1:3]), dtype=np.float32)
 
 
 class BallDataModule(L.LightningDataModule):
