@@ -194,3 +194,16 @@ def test_unreadable_file(tmp_path):
     path.write_bytes(b"\x80\x02truncated")  # a truncated legacy pickle
     with pytest.raises(ValueError, match="cannot read"):
         load_weights(WASB(), path)
+
+
+def test_shipped_weights_load_strictly():
+    """The weights rally3d ships (inference/weights) load into WASB with strict=True."""
+    from inference.detection.detect import SHIPPED
+    from inference.models.checkpoint import load_weights
+    from inference.models.registry import build_model
+
+    path = SHIPPED["wasb"]
+    if not path.is_file():
+        pytest.skip("no shipped weights")
+    info = load_weights(build_model("wasb"), path)
+    assert not info["missing_keys"] and not info["unexpected_keys"]
