@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.rally3d-installed
 DEMO   ?= runs/demo
 SAMPLE := datasets/sample/padel_sample
 
-.PHONY: venv demo test test-all sample bench clean help
+.PHONY: venv chromium demo test test-all sample bench clean help
 
 help:
 	@echo "make demo   - set up .venv and run rally3d on the embedded sample clip"
@@ -30,10 +30,19 @@ $(STAMP): pyproject.toml constraints.txt
 
 venv: $(STAMP)
 
-test: venv
+# The browser tests drive Debian's chromium through Playwright (never `playwright install`: no downloads).
+CHROMIUM ?= /usr/bin/chromium
+chromium:
+	@test -x $(CHROMIUM) || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing Debian chromium for the browser tests"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium fonts-dejavu-core >/dev/null; \
+	  else echo "The browser tests need Debian chromium at $(CHROMIUM): run 'sudo apt-get install chromium' (or set CHROMIUM=/path)"; exit 1; fi; }
+
+test: venv chromium
 	$(PY) -m pytest -m "not slow" -q
 
-test-all: venv
+test-all: venv chromium
 	$(PY) -m pytest -q
 
 demo: venv
