@@ -1,0 +1,107 @@
+"""Shared fixtures: headless Debian Chromium driven by Playwright for the browser (E2E) tests.
+
+The browser is Debian's ``chromium`` (installed by ``make test``), never a Playwright download. Flags and
+pitfalls follow ``docs/viser.md`` §4: fixed DPR, software WebGL, the WebGL canvas is the three.js one.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--enable-unsafe-swiftshader",
+]
+WEBGL_CANVAS = 'canvas[data-engine^="three.js"]'
+
+
+def chromium_executable() -> str:
+    """Path of the system Chromium; a clear failure naming the fix when it is missing."""
+    path = os.environ.get("CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+    if not Path(path).exists():
+        pytest.fail(f"Chromium not found at {path}: run `make test` (installs Debian chromium) "
+                    "or `apt-get install chromium`, or set CHROMIUM=/path/to/chromium")
+    return path
+
+
+def free_port() -> int:
+    """A TCP port that is free on 127.0.0.1 right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[object]:
+    """One headless Chromium for the whole session (Playwright sync API)."""
+    from playwright.sync_api import sync_playwright
+
+    exe = chromium_executable()
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=exe, headless=True, args=CHROMIUM_FLAGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def viser_page(browser) -> Iterator[Callable[..., object]]:
+    """Factory ``open(port, width=1400, height=900) -> page`` that loads a viser server and waits for its canvas.
+
+    The page is closed after the test. The software-WebGL warning toast is dismissed so it does not cover
+    the canvas corner.
+    """
+    pages = []
+
+    def open_page(port: int, width: int = 1400, height: int = 900, timeout_s: float = 30.0):
+        page = browser.new_page(viewport={"width": width, "height": height})
+        pages.append(page)
+        page.goto(f"http://127.0.0.1:{port}/?fixedDpr=1", wait_until="load")
+        page.wait_for_selector(WEBGL_CANVAS, timeout=timeout_s * 1000)
+        dismiss_toasts(page)
+        return page
+
+    yield open_page
+    for page in pages:
+        page.close()
+
+
+def dismiss_toasts(page, wait_s: float = 1.0) -> None:
+    """Close viser's notification toasts (e.g. "Software WebGL rendering detected") if present."""
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        buttons = page.locator(".mantine-Notification-root button")
+        if buttons.count():
+            for i in range(buttons.count()):
+                try:
+                    buttons.nth(i).click(timeout=500)
+                except Exception:  # the toast may vanish on its own between count and click
+                    pass
+            return
+        time.sleep(0.1)
+
+
+def wait_until(predicate: Callable[[], bool], timeout_s: float = 15.0, what: str = "condition") -> None:
+    """Poll ``predicate`` until it is true; fail the test naming ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.05)
+    pytest.fail(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+@pytest.fixture
+def port() -> int:
+    """A free local port for a viser server."""
+    return free_port()
