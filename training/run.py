@@ -33,6 +33,10 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
 
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit (optionally resuming from ``ckpt_path``), then test the best checkpoint; returns the metrics."""
+    if cfg.get("task") == "events":  # hit-event models (conf/experiment/hitnet_*.yaml)
+        from training.events.run import train_events
+
+        return train_events(cfg)
     log.info("config:\n%s", OmegaConf.to_yaml(cfg, resolve=False))
     datamodule, model, trainer = build(cfg)
     metrics: dict[str, float] = {}
@@ -50,7 +54,12 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     """Evaluate a detector on whole clips of ``split`` at full resolution, the way inference runs it:
     windows → heatmaps → candidates → tracker. Prints the thesis-style tables at τ = 4 px in original
     frame pixels (WASB-SBDT) and τ = 10 px at 1280×720 (the thesis), for our tracker and WASB's
-    max-score tracker, with frames/s; returns the F1s."""
+    max-score tracker, with frames/s; returns the F1s. Hit-event models (``task: events``) print their
+    event-set tables instead (training/events/run.py)."""
+    if cfg.get("task") == "events":
+        from training.events.run import evaluate_events
+
+        return evaluate_events(cfg)
     from inference.clipio import Clip, Manifest
     from inference.detection.detect import BallDetectorRunner
     from inference.detection.metrics import TableRow, evaluate_detections, format_table

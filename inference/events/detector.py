@@ -1,0 +1,234 @@
+"""The runtime hit-event detector: a ball track (and optionally camera, players) → events.csv rows.
+
+Example:
+    >>> det = EventDetector.from_checkpoint(None, sport="padel")   # the shipped default
+    >>> result = det.predict(clip.read_ball(), fps, width, height, camera=clip.read_camera())
+    >>> write_events_csv(clip.events_path, result.events)
+
+A model file (``*.pth.tar``, loaded with ``weights_only=True``) is a dict:
+``format = "rally3d-events"``, ``kind`` (``hitnet`` | ``physics``), ``class_set`` (dict), ``features``
+(dict), ``window``, ``last_k``, ``net`` (HitNet hyper-parameters), ``state_dict``, ``decode`` (the tuned
+decoder) and ``physics`` (parameters of the physics detector), plus ``meta`` (training data, metrics).
+"""
+from __future__ import annotations
+
+import logging
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from inference.clipio import BallTrack, HitEvents, PlayerTracks
+from inference.court import load_court
+
+from .classes import ClassSet
+from .decode import DecodeParams, decode
+from .features import (
+    FeatureConfig,
+    clip_features,
+    dense_xy,
+    from_ref_frames,
+    make_windows,
+    probs_to_clip,
+    resample_xy,
+    window_probs_to_frames,
+)
+from .network import HitNet
+from .physics import PhysicsParams, physics_probs
+
+log = logging.getLogger(__name__)
+
+FORMAT = "rally3d-events"
+WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
+DEFAULT_WEIGHTS = {"padel": "hitnet_padel.pth.tar", "tennis": "hitnet_tennis.pth.tar"}
+KINDS = ("hitnet", "physics")
+
+
+@dataclass
+class EventResult:
+    """Output of :meth:`EventDetector.predict`.
+
+    Attributes:
+        events: fine-grained events (formats.md), ready for ``write_events_csv``.
+        probs: ``(T, C)`` per-frame class probabilities at the clip's frame rate.
+        classes: the C class names (``probs`` columns).
+        coarse: ``(N,)`` class name of each event (before resolving to a fine label).
+    """
+
+    events: HitEvents
+    probs: np.ndarray
+    classes: tuple[str, ...]
+    coarse: tuple[str, ...] = ()
+
+
+def default_weights(sport: str) -> Path:
+    if sport not in DEFAULT_WEIGHTS:
+        raise KeyError(f"no shipped hit-event model for sport {sport!r}; known: {sorted(DEFAULT_WEIGHTS)}. "
+                       "Pass a model file (train one with python train.py +experiment=hitnet_<sport>).")
+    return WEIGHTS_DIR / DEFAULT_WEIGHTS[sport]
+
+
+def load_model_file(path: str | Path) -> dict[str, Any]:
+    """Read and validate an exported event-model file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"hit-event model {path} not found; train one with "
+                                "`python train.py +experiment=hitnet_padel` or pass --weights PATH")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 — any unreadable file is the same user error
+        raise ValueError(f"{path} is not a readable rally3d hit-event model ({type(e).__name__}: {e})") from None
+    if not isinstance(blob, dict) or blob.get("format") != FORMAT:
+        raise ValueError(f"{path} is not a rally3d hit-event model (no format={FORMAT!r}); a Lightning checkpoint "
+                         "is exported with training.events.export.export_model")
+    if blob.get("kind") not in KINDS:
+        raise ValueError(f"{path}: unknown model kind {blob.get('kind')!r}; known: {KINDS}")
+    return blob
+
+
+class EventDetector:
+    """Hit events from a ball track with a HitNet or the physics-aware detector, then the decoder.
+
+    Args:
+        kind: ``hitnet`` or ``physics``.
+        class_set, features, decode_params: see their classes.
+        net: the HitNet (``kind == 'hitnet'``); window, last_k: its window length and label block.
+        physics: parameters of the physics detector.
+        meta: free-form provenance (training data, metrics).
+    """
+
+    def __init__(self, kind: str, class_set: ClassSet, features: FeatureConfig, decode_params: DecodeParams, *,
+                 net: HitNet | None = None, window: int = 12, last_k: int = 6,
+                 physics: PhysicsParams | None = None, meta: dict | None = None):
+        if kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+        if kind == "hitnet" and net is None:
+            raise ValueError("a hitnet detector needs its network")
+        if not 1 <= last_k <= window:
+            raise ValueError(f"need 1 <= last_k <= window, got last_k={last_k}, window={window}")
+        self.kind, self.class_set, self.features, self.decode_params = kind, class_set, features, decode_params
+        self.net = net.eval() if net is not None else None
+        self.window, self.last_k = int(window), int(last_k)
+        self.physics = physics or PhysicsParams()
+        self.meta = meta or {}
+        self.court = load_court(class_set.sport) if class_set.sport else None
+
+    # ------------------------------------------------------------------------------------ loading
+    @classmethod
+    def from_checkpoint(cls, path: str | Path | None, sport: str = "padel") -> EventDetector:
+        """Load a model file; ``None`` loads the shipped default of ``sport``."""
+        blob = load_model_file(default_weights(sport) if path is None else path)
+        return cls.from_blob(blob)
+
+    @classmethod
+    def from_blob(cls, blob: dict[str, Any]) -> EventDetector:
+        class_set = ClassSet.from_dict(blob["class_set"])
+        features = FeatureConfig.from_dict(blob["features"])
+        net = None
+        if blob["kind"] == "hitnet":
+            net = HitNet(**blob["net"])
+            net.load_state_dict(blob["state_dict"])
+        return cls(blob["kind"], class_set, features, DecodeParams.from_dict(blob["decode"]), net=net,
+                   window=int(blob.get("window", 12)), last_k=int(blob.get("last_k", 6)),
+                   physics=PhysicsParams(**blob.get("physics", {})), meta=dict(blob.get("meta", {})))
+
+    def to_blob(self) -> dict[str, Any]:
+        return {"format": FORMAT, "kind": self.kind, "class_set": self.class_set.to_dict(),
+                "features": self.features.to_dict(), "window": self.window, "last_k": self.last_k,
+                "net": dict(self.net.hparams) if self.net is not None else {},
+                "state_dict": self.net.state_dict() if self.net is not None else {},
+                "decode": self.decode_params.to_dict(), "physics": self.physics.to_dict(), "meta": self.meta}
+
+    def save(self, path: str | Path) -> Path:
+        """Write the model file atomically."""
+        import io
+
+        from inference.clipio import atomic_write_bytes
+
+        buf = io.BytesIO()
+        torch.save(self.to_blob(), buf)
+        return atomic_write_bytes(Path(path), buf.getvalue())
+
+    # ---------------------------------------------------------------------------------- prediction
+    @property
+    def ref_fps(self) -> float | None:
+        return self.features.ref_fps
+
+    def ref_probs(self, ball: BallTrack, n_frames: int, fps: float, *, camera=None,
+                  players: PlayerTracks | None = None) -> np.ndarray:
+        """``(T', C)`` per-frame class probabilities at the reference rate."""
+        if self.kind == "physics":
+            xy = resample_xy(dense_xy(ball, n_frames), fps, self.ref_fps)
+            return physics_probs(xy, self.class_set, self.physics, camera=camera, court=self.court)
+        feats = clip_features(ball, n_frames, fps, self.features, camera=camera, court=self.court, players=players)
+        wins = torch.from_numpy(make_windows(feats, self.window))
+        win_probs = self.net.probs(wins).numpy().astype(np.float64)
+        return window_probs_to_frames(win_probs, len(feats), self.window, self.last_k)
+
+    def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
+                players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None) -> EventResult:
+        """Events of one clip.
+
+        Args:
+            ball: the 2D ball (annotated or detected), normalised coordinates.
+            fps: the clip's frame rate; width, height: its image size (pixels).
+            camera: resolves grouped classes to their surface (else their default label).
+            players: pose tracks (used by models trained with poses).
+            frames: a ``FrameSource`` (unused by the ball-only models).
+            n_frames: frames in the clip (default: the frame source's length or the track's last frame + 1).
+        """
+        if not fps or fps <= 0 or not np.isfinite(fps):
+            raise ValueError(f"fps must be a positive number, got {fps}")
+        if width <= 0 or height <= 0:
+            raise ValueError(f"width and height must be positive, got {width}x{height}")
+        if n_frames is None:
+            n_frames = len(frames) if frames is not None and hasattr(frames, "__len__") else (
+                int(ball.frame[-1]) + 1 if len(ball) else 0)
+        C = self.class_set.n
+        if n_frames == 0 or not np.any(ball.visibility > 0):
+            warnings.warn("the ball track has no visible ball: no events can be detected", stacklevel=2)
+            probs = np.zeros((n_frames, C))
+            probs[:, 0] = 1.0
+            return EventResult(HitEvents.empty(), probs, self.class_set.classes)
+        p_ref = self.ref_probs(ball, n_frames, fps, camera=camera, players=players)
+        f_ref, cls = decode(p_ref, self.ref_fps or fps, self.class_set, self.decode_params)
+        frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
+        events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
+        return EventResult(events, probs_to_clip(p_ref, n_frames, fps, self.ref_fps), self.class_set.classes,
+                           coarse)
+
+    # ------------------------------------------------------------------------------ fine labels
+    def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,
+                     camera) -> tuple[HitEvents, tuple[str, ...]]:
+        names = [self.class_set.classes[c] for c in cls]
+        fine = [self.resolve(n, int(f), ball, n_frames, camera) for n, f in zip(names, frames)]
+        out_f, out_l, out_c = [], [], []
+        for f, label, name in sorted(zip(frames.tolist(), fine, names), key=lambda x: x[0]):
+            f = max(f, out_f[-1] + 1) if out_f else f  # two events mapped onto one clip frame
+            if f >= n_frames:
+                break
+            out_f.append(f)
+            out_l.append(label)
+            out_c.append(name)
+        return HitEvents(np.array(out_f, np.int64), np.array(out_l, dtype=str)), tuple(out_c)
+
+    def resolve(self, cls_name: str, frame: int, ball: BallTrack, n_frames: int, camera) -> str:
+        """The fine label of a decoded class: a ray/plane test with the camera for grouped classes
+        (the first plane of the group the line of sight reaches), else the class's default label."""
+        group = self.class_set.resolve_with_camera.get(cls_name)
+        if group and camera is not None and self.court is not None:
+            xy = dense_xy(ball, n_frames)
+            for d in (0, -1, 1, -2, 2):
+                k = frame + d
+                if 0 <= k < n_frames and np.isfinite(xy[k]).all():
+                    from inference.geometry import intersect_event
+
+                    o, v = camera.rays_normalized(xy[k][None])
+                    hit = intersect_event(o, v, self.court, list(group), offset=self.court.ball.radius)
+                    if hit.valid[0]:
+                        return str(hit.planes[int(hit.plane_index[0])].event)
+                    break
+        return self.class_set.fine_label(cls_name)

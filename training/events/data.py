@@ -1,0 +1,294 @@
+"""Windows, class balancing, augmentation and the Lightning data module of the hit-event models.
+
+Sources of clips (``EventDataModule``):
+- ``source: synthetic`` — simulated rallies through random cameras (:mod:`.simulate`), train / val / test
+  with different seeds;
+- ``source: folder`` — a dataset folder with ``manifest.yaml`` (``rally3d synth`` output, a converted
+  TrackNet ``Label.csv``, annotated clips): ``ball.csv`` and ``events.csv`` (``gt/events.csv`` if present)
+  of each clip of each split.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset, Sampler
+
+from inference.clipio import Clip, Manifest
+from inference.court import load_court
+from inference.events.classes import ClassSet
+from inference.events.features import FeatureConfig, clip_features, make_windows, to_ref_frames, window_labels
+
+from .simulate import SimClip, simulate_clips
+
+log = logging.getLogger(__name__)
+
+
+# ------------------------------------------------------------------------------------------ clip sets
+@dataclass
+class LabelledClip:
+    """A clip ready for the event models: features at the reference rate and per-frame classes."""
+
+    sim: SimClip
+    feats: np.ndarray   # (T', F) float32
+    y: np.ndarray       # (T',) int64 classes at the reference rate
+
+
+def ref_labels(sim: SimClip, class_set: ClassSet, features: FeatureConfig, n_ref: int,
+               on_unmapped: str = "error") -> np.ndarray:
+    """``(n_ref,)`` classes of the clip's events at the reference frame rate."""
+    y_native = class_set.encode(sim.events, sim.n_frames, on_unmapped=on_unmapped, where=sim.name)
+    frames = np.flatnonzero(y_native)
+    y = np.zeros(n_ref, np.int64)
+    ref = np.clip(to_ref_frames(frames, sim.fps, features.ref_fps), 0, max(n_ref - 1, 0))
+    for f, c in zip(ref, y_native[frames]):
+        if y[f] and f + 1 < n_ref:
+            f = f + 1  # two events on one reference frame: keep both
+        y[f] = c
+    return y
+
+
+def label_clips(clips: list[SimClip], class_set: ClassSet, features: FeatureConfig,
+                on_unmapped: str = "error") -> list[LabelledClip]:
+    court = load_court(class_set.sport) if class_set.sport else None
+    out = []
+    for c in clips:
+        feats = clip_features(c.ball, c.n_frames, c.fps, features, camera=c.camera, court=court)
+        out.append(LabelledClip(c, feats, ref_labels(c, class_set, features, len(feats), on_unmapped)))
+    return out
+
+
+def clips_from_folder(root: str | Path, split: str) -> list[SimClip]:
+    """The clips of one split of a dataset folder as :class:`SimClip` (camera None when absent)."""
+    root = Path(root)
+    if not (root / "manifest.yaml").is_file():
+        raise FileNotFoundError(f"no manifest.yaml in {root}: point data.root to a dataset folder "
+                                "(rally3d synth --out DIR, or training.events.tracknet.convert_tracknet_dataset)")
+    out = []
+    for path in Manifest.load(root).paths(split):
+        clip = Clip(path)
+        info = clip.info
+        n = clip.n_frames if (clip.root / info.video).exists() else None
+        ball = clip.read_ball()
+        n = n or (int(ball.frame[-1]) + 1 if len(ball) else 0)
+        gt_events = clip.gt_dir / "events.csv"
+        events = clip.read_events(gt=gt_events.is_file())
+        camera = None
+        for gt in (True, False):
+            try:
+                camera = clip.read_camera(gt=gt)
+                break
+            except (FileNotFoundError, OSError):
+                continue
+        out.append(SimClip(str(clip.root), float(info.fps), int(info.width), int(info.height), n, ball, events,
+                           camera))
+    return out
+
+
+# ------------------------------------------------------------------------------------------- windows
+def clip_windows(lc: LabelledClip, window: int, last_k: int) -> tuple[np.ndarray, np.ndarray]:
+    """All windows of a clip: ``(N, W, F)`` features and ``(N,)`` labels."""
+    return make_windows(lc.feats, window), window_labels(lc.y, window, last_k)
+
+
+class WindowSet(Dataset):
+    """Windows of many clips held in memory: ``x (N, W, F) float32``, ``y (N,) int64``."""
+
+    def __init__(self, clips: list[LabelledClip], window: int, last_k: int):
+        xs, ys = zip(*(clip_windows(c, window, last_k) for c in clips)) if clips else ((), ())
+        self.x = torch.from_numpy(np.concatenate(xs).astype(np.float32)) if xs else torch.zeros(0, window, 1)
+        self.y = torch.from_numpy(np.concatenate(ys)) if ys else torch.zeros(0, dtype=torch.long)
+
+    def __len__(self) -> int:
+        return len(self.y)
+
+    def __getitem__(self, i):
+        return self.x[i], self.y[i]
+
+
+class BalancedSampler(Sampler):
+    """Every positive window each epoch and a fresh random draw of ``neg_ratio`` × as many negatives
+    (MonoTrack keeps each negative with probability #pos/#neg)."""
+
+    def __init__(self, labels: torch.Tensor, neg_ratio: float = 1.0, seed: int = 0):
+        self.pos = torch.nonzero(labels > 0).flatten()
+        self.neg = torch.nonzero(labels == 0).flatten()
+        self.n_neg = min(len(self.neg), int(round(neg_ratio * max(len(self.pos), 1))))
+        self.gen = torch.Generator().manual_seed(seed)
+
+    def __len__(self) -> int:
+        return len(self.pos) + self.n_neg
+
+    def __iter__(self):
+        neg = self.neg[torch.randperm(len(self.neg), generator=self.gen)[: self.n_neg]]
+        idx = torch.cat([self.pos, neg])
+        return iter(idx[torch.randperm(len(idx), generator=self.gen)].tolist())
+
+
+# ------------------------------------------------------------------------------------- augmentation
+@dataclass(frozen=True)
+class AugmentConfig:
+    """MonoTrack's augmentations on batches of windows (shared/docs/models.md §4).
+
+    Each window gets one of {identity, drop a 4-frame block, corrupt a 4-frame block, drop 5 % of
+    frames, corrupt 5 %, rotate ±15° + shear ≤ 0.1, and combinations} with ``weights``; separately a
+    horizontal mirror with probability ``p_mirror`` (class labels permuted by the class set's mirror
+    pairs, e.g. ``wall_left`` ↔ ``wall_right``).
+    """
+
+    enabled: bool = True
+    weights: tuple[float, ...] = (2, 1, 1, 1, 1, 5, 1, 1, 9, 9)
+    block: int = 4
+    frac: float = 0.05
+    rotate_deg: float = 15.0
+    shear: float = 0.1
+    p_mirror: float = 0.5
+
+
+OPS = (  # the ten choices of `weights`: (drop/corrupt, block/frac, geometric)
+    (), ("drop_block",), ("corrupt_block",), ("drop_frac",), ("corrupt_frac",), ("affine",),
+    ("drop_block", "affine"), ("corrupt_block", "affine"), ("drop_frac", "affine"), ("corrupt_frac", "affine"),
+)
+
+
+def position_columns(features: FeatureConfig) -> list[tuple[int, int]]:
+    """(x, y) column pairs that hold image positions in ``[1, 2]`` (0 = missing)."""
+    pairs = [(0, 1)]
+    base = 5 if features.velocity else 2
+    if features.corners:
+        pairs += [(base + 2 * k, base + 2 * k + 1) for k in range(4)]
+        base += 8
+    if features.poses:
+        pairs += [(base + 2 * k, base + 2 * k + 1) for k in range(17 * features.players)]
+    return pairs
+
+
+def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg: AugmentConfig,
+                  mirror_perm: torch.Tensor, gen: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Augment ``(B, W, F)`` windows and their labels ``(B,)`` (see :class:`AugmentConfig`)."""
+    if not cfg.enabled or len(x) == 0:
+        return x, y
+    x = x.clone()
+    B, W, _ = x.shape
+    w = torch.tensor(cfg.weights, dtype=torch.float)
+    op = torch.multinomial(w / w.sum(), B, replacement=True, generator=gen)
+    pairs = position_columns(features)
+    ball_cols = list(range(5 if features.velocity else 2))
+    # geometric: rotation + shear about the image centre (1.5, 1.5), and the mirror
+    ang = (torch.rand(B, generator=gen) * 2 - 1) * np.radians(cfg.rotate_deg)
+    sh = (torch.rand(B, generator=gen) * 2 - 1) * cfg.shear
+    geo = torch.tensor([("affine" in OPS[int(o)]) for o in op])
+    ang, sh = torch.where(geo, ang, 0.0), torch.where(geo, sh, 0.0)
+    mirror = torch.rand(B, generator=gen) < cfg.p_mirror
+    c, s = torch.cos(ang), torch.sin(ang)
+    A = torch.stack([torch.stack([c, -s + sh * c], 1), torch.stack([s, c + sh * s], 1)], 1)  # (B, 2, 2)
+    A[:, 0, :] *= torch.where(mirror, -1.0, 1.0)[:, None]
+    for cx, cy in pairs:
+        p = x[:, :, [cx, cy]]
+        known = (p != 0).any(dim=2, keepdim=True)
+        q = torch.einsum("bij,bwj->bwi", A, p - 1.5) + 1.5
+        x[:, :, [cx, cy]] = torch.where(known, q, p)
+    if features.velocity:
+        x[:, :, 2:4] = torch.einsum("bij,bwj->bwi", A, x[:, :, 2:4])
+    y = torch.where(mirror, mirror_perm[y], y)
+    # drops and corruptions of the ball columns
+    for b in range(B):
+        names = OPS[int(op[b])]
+        rows = None
+        if any(n.endswith("block") for n in names):
+            a = int(torch.randint(0, max(W - cfg.block, 1), (1,), generator=gen))
+            rows = torch.arange(a, min(a + cfg.block, W))
+        elif any(n.endswith("frac") for n in names):
+            rows = torch.nonzero(torch.rand(W, generator=gen) < cfg.frac).flatten()
+        if rows is None or len(rows) == 0:
+            continue
+        if any(n.startswith("drop") for n in names):
+            x[b, rows[:, None], torch.tensor(ball_cols)[None]] = 0.0
+        else:
+            x[b, rows, 0:2] = 1.0 + torch.rand(len(rows), 2, generator=gen)
+            if features.velocity:
+                x[b, rows, 2:4] = torch.randn(len(rows), 2, generator=gen) * 0.1
+                x[b, rows, 4] = 1.0
+    return x, y
+
+
+# -------------------------------------------------------------------------------------- data module
+class EventDataModule(L.LightningDataModule):
+    """Windows for HitNet training (see the module docstring for the sources).
+
+    Args:
+        sport, class_set: the class set (name or dict); features: :class:`FeatureConfig` fields.
+        window, last_k: W and K. source: ``synthetic`` or ``folder``; root: the dataset folder.
+        n_train, n_val, n_test, seed: synthetic clip counts; seeds ``seed``, ``seed + 1``, ``seed + 2``.
+        on_unmapped: ``error`` or ``warn`` for labels the class set does not cover.
+        neg_ratio: negatives per positive per epoch. cache_dir: simulated clips are cached here.
+    """
+
+    def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
+                 window: int = 12, last_k: int = 6, source: str = "synthetic", root: str | None = None,
+                 n_train: int = 600, n_val: int = 100, n_test: int = 200, seed: int = 0,
+                 on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
+                 num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None):
+        super().__init__()
+        if source not in ("synthetic", "folder"):
+            raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
+        if source == "folder" and not root:
+            raise ValueError("data.source=folder needs data.root=DATASET_FOLDER")
+        if not 1 <= last_k <= window:
+            raise ValueError(f"need 1 <= last_k <= window, got {last_k}, {window}")
+        self.sport, self.class_set = sport, ClassSet.load(class_set)
+        self.features = FeatureConfig.from_dict(features or {})
+        self.window, self.last_k, self.source, self.root = window, last_k, source, root
+        self.counts = {"train": n_train, "val": n_val, "test": n_test}
+        self.seed, self.on_unmapped, self.neg_ratio = seed, on_unmapped, neg_ratio
+        self.batch_size, self.num_workers, self.cache_dir = batch_size, num_workers, cache_dir
+        self.augment = AugmentConfig(**(augment or {}))
+        self.clips: dict[str, list[LabelledClip]] = {}
+        self.sets: dict[str, WindowSet] = {}
+
+    def raw_clips(self, split: str) -> list[SimClip]:
+        if self.source == "folder":
+            clips = clips_from_folder(self.root, split)
+        else:
+            offset = {"train": 0, "val": 1, "test": 2}[split]
+            clips = simulate_clips(self.sport, self.counts[split], self.seed * 10 + offset, self.cache_dir)
+        return clips
+
+    def labelled(self, split: str) -> list[LabelledClip]:
+        if split not in self.clips:
+            raw = self.raw_clips(split)
+            if not raw:
+                raise ValueError(f"the {split} split of {self.root or 'the synthetic data'} has no clips")
+            self.clips[split] = label_clips(raw, self.class_set, self.features, self.on_unmapped)
+            n_ev = sum(int((c.y > 0).sum()) for c in self.clips[split])
+            if n_ev == 0:
+                log.warning("the %s split has no events of the class set %s: the model cannot learn events "
+                            "from it", split, self.class_set.name)
+        return self.clips[split]
+
+    def setup(self, stage: str | None = None) -> None:
+        splits = ("train", "val") if stage in (None, "fit", "validate") else ("test",)
+        for split in splits:
+            if split not in self.sets:
+                self.sets[split] = WindowSet(self.labelled(split), self.window, self.last_k)
+
+    def train_dataloader(self):
+        ds = self.sets["train"]
+        if int((ds.y > 0).sum()) == 0:
+            raise ValueError("the training split has no events: nothing to learn (check events.csv and the "
+                             f"class set {self.class_set.name})")
+        return DataLoader(ds, batch_size=self.batch_size, sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed),
+                          num_workers=self.num_workers)
+
+    def val_dataloader(self):
+        ds = self.sets["val"]
+        return DataLoader(ds, batch_size=self.batch_size * 4, sampler=BalancedSampler(ds.y, 3.0, self.seed + 1),
+                          num_workers=self.num_workers)
+
+    def test_dataloader(self):
+        self.setup("test")
+        return DataLoader(self.sets["test"], batch_size=self.batch_size * 4, num_workers=self.num_workers)

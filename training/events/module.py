@@ -1,0 +1,83 @@
+"""The Lightning module of HitNet: cross-entropy on balanced, augmented windows; validation reports
+window accuracy and the macro F1 over event classes (``val/f1``, the checkpoint monitor)."""
+from __future__ import annotations
+
+import lightning as L
+import torch
+from torch import nn
+
+from inference.events.classes import ClassSet
+from inference.events.features import FeatureConfig
+from inference.events.network import HitNet
+
+from .data import AugmentConfig, augment_batch
+
+
+class HitNetModule(L.LightningModule):
+    """Args:
+        class_set: name or dict; features: :class:`FeatureConfig` fields (must match the data's).
+        hidden, layers, bidirectional, dropout: the network. lr, weight_decay, clip_norm: Adam (MonoTrack:
+        lr 1e-2, clipnorm 2). window, last_k: stored for export. augment: :class:`AugmentConfig` fields.
+    """
+
+    def __init__(self, class_set: str | dict = "padel6", features: dict | None = None, hidden: int = 64,
+                 layers: int = 2, bidirectional: bool = True, dropout: float = 0.0, lr: float = 3e-3,
+                 weight_decay: float = 0.0, window: int = 12, last_k: int = 6, augment: dict | None = None,
+                 lr_patience: int = 3):
+        super().__init__()
+        self.save_hyperparameters()
+        self.class_set = ClassSet.load(class_set)
+        self.features = FeatureConfig.from_dict(features or {})
+        self.net = HitNet(self.features.n_features, self.class_set.n, hidden, layers, bidirectional, dropout)
+        self.aug = AugmentConfig(**(augment or {}))
+        self.register_buffer("mirror_perm", torch.as_tensor(self.class_set.mirror_permutation()), persistent=False)
+        self.loss = nn.CrossEntropyLoss()
+        self._val = []
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+    def training_step(self, batch, _):
+        x, y = batch
+        x, y = augment_batch(x, y, self.features, self.aug, self.mirror_perm)
+        loss = self.loss(self(x), y)
+        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y))
+        return loss
+
+    def _eval_step(self, batch, stage: str):
+        x, y = batch
+        logits = self(x)
+        self.log(f"{stage}/loss", self.loss(logits, y), on_epoch=True, batch_size=len(y))
+        self._val.append((logits.argmax(1).cpu(), y.cpu()))
+
+    def validation_step(self, batch, _):
+        self._eval_step(batch, "val")
+
+    def test_step(self, batch, _):
+        self._eval_step(batch, "test")
+
+    def _eval_end(self, stage: str) -> None:
+        if not self._val:
+            return
+        pred, y = (torch.cat(t) for t in zip(*self._val))
+        self._val = []
+        f1s = []
+        for c in range(1, self.class_set.n):
+            tp = ((pred == c) & (y == c)).sum().item()
+            n = (pred == c).sum().item() + (y == c).sum().item()
+            if (y == c).any():
+                f1s.append(2 * tp / max(n, 1))
+        self.log(f"{stage}/acc", (pred == y).float().mean().item())
+        self.log(f"{stage}/f1", float(sum(f1s) / max(len(f1s), 1)), prog_bar=True)
+
+    def on_validation_epoch_end(self) -> None:
+        self._eval_end("val")
+
+    def on_test_epoch_end(self) -> None:
+        self._eval_end("test")
+
+    def configure_optimizers(self):
+        opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+        sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode="max", factor=0.5,
+                                                           patience=self.hparams.lr_patience)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": "val/f1"}}

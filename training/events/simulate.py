@@ -1,0 +1,141 @@
+"""Training data for the ball-only event models without rendering: simulated rallies seen through
+random cameras, as the clip files would hold them (per-frame 2D ball, visibility, fine-grained events).
+
+Each rally draws its camera exactly like ``rally3d synth`` (preset randomised: position, resolution,
+fps, distortion) and its rally from the same simulator, so the 2D tracks have the distribution of the
+rendered clips. A held-out set is a different seed. ``perturb`` makes a track look like a detector's
+output (misses, jitter, false positives) for end-to-end figures.
+
+Example:
+    >>> clips = simulate_clips("padel", 100, seed=1)
+    >>> clips[0].ball, clips[0].events, clips[0].fps
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from inference.camera import Camera
+from inference.clipio import BallTrack, HitEvents
+from inference.court import load_court
+from training.synth.cameras import CameraSpec
+from training.synth.generate import DEFAULT_CAMERA
+from training.synth.groundtruth import event_table, inside_image
+from training.synth.rally import default_config, simulate_rally
+
+
+@dataclass
+class SimClip:
+    """One simulated clip: ``ball`` (every frame a row), ``events`` (fine labels), ``fps``, image size,
+    ``camera`` (ground truth) and ``name``."""
+
+    name: str
+    fps: float
+    width: int
+    height: int
+    n_frames: int
+    ball: BallTrack
+    events: HitEvents
+    camera: Camera
+
+
+def project_track(rally, camera: Camera) -> BallTrack:
+    """The ball of every frame projected by ``camera``: visibility 1 inside the image, 0 elsewhere or
+    while the ball does not exist yet (the 2D labels of a rendered clip, without player occlusion)."""
+    n = rally.n_frames
+    t = rally.frame_times
+    vis = np.zeros(n, np.int8)
+    xy = np.full((n, 2), np.nan)
+    live = (t >= rally.ball.t[0]) & (t <= rally.ball.t[-1])
+    if live.any():
+        X = rally.ball.sample(t[live])
+        px = camera.project(X)
+        front = camera.depth(X) > 0.1
+        ok = inside_image(px, camera.image_size) & front
+        idx = np.flatnonzero(live)[ok]
+        vis[idx] = 1
+        xy[idx] = px[ok] / np.asarray(camera.image_size, float)
+    return BallTrack(np.arange(n), vis, np.clip(xy, 0, 1))
+
+
+def simulate_clip(sport: str, seed: int, court=None) -> SimClip:
+    """One rally with a randomised camera; the same seed gives the same clip."""
+    court = court or load_court(sport)
+    r_cam, r_rally = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    spec = CameraSpec.preset(DEFAULT_CAMERA[sport]).randomised(r_cam)
+    camera = spec.build(court)
+    rally = simulate_rally(court, spec.fps, r_rally, sport=sport, config=default_config(sport))
+    return SimClip(f"{sport}_{seed}", spec.fps, spec.width, spec.height, rally.n_frames,
+                   project_track(rally, camera), event_table(rally), camera)
+
+
+def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None = None,
+                   progress: bool = True) -> list[SimClip]:
+    """``n`` clips with seeds ``seed * 1_000_003 + k``; cached as a pickle under ``cache_dir``."""
+    if n <= 0:
+        raise ValueError(f"need at least one clip, got n={n}")
+    cache = None
+    if cache_dir is not None:
+        key = hashlib.sha1(json.dumps([sport, n, seed, 1]).encode()).hexdigest()[:10]
+        cache = Path(cache_dir) / f"sim_{sport}_{n}_{seed}_{key}.pkl"
+        if cache.is_file():
+            with open(cache, "rb") as fh:
+                return pickle.load(fh)
+    court = load_court(sport)
+    clips = [simulate_clip(sport, seed * 1_000_003 + k, court)
+             for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_suffix(".tmp")
+        with open(tmp, "wb") as fh:
+            pickle.dump(clips, fh)
+        tmp.replace(cache)
+    return clips
+
+
+@dataclass(frozen=True)
+class DetectorNoise:
+    """How a ball detector's output differs from the annotation.
+
+    Attributes:
+        jitter_px: Gaussian position noise (pixels, per axis).
+        p_miss: independent missed frames; bursts: mean number of miss bursts per second,
+            burst_len: their length range (frames).
+        p_false: frames whose position is replaced by a false positive (a reflection or a random spot).
+    """
+
+    jitter_px: float = 1.5
+    p_miss: float = 0.05
+    bursts: float = 0.3
+    burst_len: tuple[int, int] = (3, 12)
+    p_false: float = 0.02
+
+
+def perturb(clip: SimClip, rng: np.random.Generator, noise: DetectorNoise = DetectorNoise()) -> BallTrack:
+    """The clip's ball track as a detector might return it."""
+    n = clip.n_frames
+    vis = clip.ball.visibility.copy()
+    xy = clip.ball.xy.copy()
+    size = np.array([clip.width, clip.height], float)
+    seen = vis > 0
+    xy[seen] += rng.normal(0, noise.jitter_px, (seen.sum(), 2)) / size
+    miss = rng.random(n) < noise.p_miss
+    for _ in range(rng.poisson(noise.bursts * n / clip.fps)):
+        a = int(rng.integers(0, n))
+        miss[a:a + int(rng.integers(noise.burst_len[0], noise.burst_len[1] + 1))] = True
+    false = rng.random(n) < noise.p_false
+    for i in np.flatnonzero(false):
+        if seen[i] and rng.random() < 0.5:  # a reflection: mirrored about a nearby vertical line
+            xy[i] = [xy[i, 0], min(1.0, xy[i, 1] + rng.uniform(0.02, 0.15))]
+        else:
+            xy[i] = rng.uniform(0.05, 0.95, 2)
+        vis[i] = 1
+    vis[miss & ~false] = 0
+    xy[vis == 0] = np.nan
+    return BallTrack(clip.ball.frame, vis, np.clip(xy, 0, 1))
