@@ -124,3 +124,12 @@ def set_image_jpeg(handle, data: bytes) -> None:
     """Replace an image node's content with already-encoded JPEG bytes (no re-encoding in viser)."""
     handle._format = "jpeg"
     handle._data = data
+
+
+def set_slider_marks(handle, marks) -> None:
+    """Replace a slider's marks (``[(value, label), ...]``; label may be empty); nothing is sent if unchanged."""
+    from viser._messages import GuiSliderMark
+
+    new = tuple(GuiSliderMark(value=float(v), label=(str(lab) or None)) for v, lab in marks) or None
+    if getattr(handle, "_marks", None) != new:
+        handle._marks = new

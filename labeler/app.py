@@ -1,0 +1,522 @@
+"""The browser labeler: a viser server, one :class:`ClientView` (session, GUI, render thread) per browser tab.
+
+Callbacks only change the tab's :class:`~labeler.state.LabelSession` or its requested frame and then ask the
+tab's render thread for an update; the thread renders the newest request only (auto-repeat of a step key
+coalesces), inside ``client.atomic()``, and prefetches the frames around it.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from inference.clipio import Clip
+
+from .frames import FrameCache
+from .panels.assist import populate_assist
+from .panels.ball import populate_ball
+from .panels.court import populate_court
+from .panels.events import populate_events
+from .panels.navigation import MODES, populate_navigation
+from .panels.stationary import populate_stationary
+from .render import Overlay
+from .state import VISIBILITY_NAMES, LabelSession, clip_overview, find_clips
+from .viewer_common import ImagePlane, fit_camera, set_image_jpeg, set_slider_marks, setup_server
+
+MAX_KEYFRAME_MARKS = 40
+
+# (label, hotkey, modifier, action name, argument): the keys avoid W/A/S/D/Q/E and the arrows (camera keys)
+HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
+    ("next frame", "L", None, "step", 1),
+    ("previous frame", "J", None, "step", -1),
+    ("10 frames forward", "L", "shift", "step", 10),
+    ("10 frames back", "J", "shift", "step", -10),
+    ("first frame", "home", None, "goto", 0),
+    ("last frame", "end", None, "goto", -1),
+    ("next unlabelled frame", "N", None, "next_unlabelled", None),
+    ("play / pause", "space", None, "toggle_play", None),
+    ("next event", "K", None, "jump_event", 1),
+    ("previous event", "K", "shift", "jump_event", -1),
+    ("ball hard to see", "H", None, "set_visibility", 2),
+    ("ball occluded", "O", None, "set_visibility", 3),
+    ("ball out of frame", "X", None, "set_visibility", 0),
+    ("clear ball", "backspace", None, "clear_ball", None),
+    ("interpolate keyframes", "I", None, "interpolate", None),
+    ("accept proposal here", "Y", None, "accept_here", None),
+    ("accept all proposals", "Y", "shift", "accept_range", None),
+    ("cycle mode (ball / stationary / court)", "M", None, "cycle_mode", None),
+    ("fit view", "F", None, "fit", None),
+    ("undo", "Z", "cmd/ctrl", "undo", None),
+    ("redo", "Z", "cmd/ctrl+shift", "redo", None),
+    ("remove event", "0", None, "event_key", 0),
+] + [(f"event {k}", str(k), None, "event_key", k) for k in range(1, 10)]
+
+
+class ClientView:
+    """One browser tab on one clip: its session, GUI, frame plane, overlays and render thread."""
+
+    def __init__(self, app: LabelerApp, client, clip: Clip):
+        self.app, self.client, self.clip = app, client, clip
+        self.lock = threading.RLock()
+        self.session = LabelSession(clip)
+        s = self.session
+        self.plane = ImagePlane(s.width, s.height)
+        self.frames = app.frame_cache(clip)
+        self.mode = "ball"
+        self.pending_visibility = 1
+        self.target, self.shown, self.direction = 0, -1, 1
+        self.playing, self.speed = False, 1.0
+        self.fit_distance: float | None = None
+        self._aspect = 0.0
+        self._overlay_dirty = self._gui_dirty = True
+        self._closed = False
+        self._cond = threading.Condition()
+        self.step_times: list[float] = []  # seconds from a step request to its frame sent (for the bench)
+        self._requested_at: dict[int, float] = {}
+        self._detector_thread: threading.Thread | None = None
+
+        first = self.frames.get(0)
+        self.image = client.scene.add_image("/frame", np.zeros((8, 8, 3), np.uint8), render_width=self.plane.render_width,
+                                            render_height=self.plane.render_height, format="jpeg")
+        set_image_jpeg(self.image, first)
+        self.image.on_click(self._on_click)
+        self.image.on_drag("left")(lambda ev: None)  # a left-drag on the frame must not orbit the camera
+        self.overlay = Overlay(client.scene, self.plane)
+
+        gui = client.gui
+        self.folder = gui.add_folder(f"{clip.root.name}", order=1)
+        with self.folder:
+            self.nav = populate_navigation(gui, self)
+            tabs = gui.add_tab_group()
+            with tabs.add_tab("Ball"):
+                self.ball_panel = populate_ball(gui, self)
+            with tabs.add_tab("Still"):
+                self.still_panel = populate_stationary(gui, self)
+            with tabs.add_tab("Events"):
+                self.events_panel = populate_events(gui, self)
+            with tabs.add_tab("Court"):
+                self.court_panel = populate_court(gui, self)
+            with tabs.add_tab("Assist"):
+                self.assist_panel = populate_assist(gui, self)
+        s.on_change(lambda _s: self.request(overlay=True, gui=True))
+        client.camera.on_update(self._on_camera)
+        self.fit()
+        self._thread = threading.Thread(target=self._render_loop, name=f"render-{client.client_id}", daemon=True)
+        self._thread.start()
+        self._player = threading.Thread(target=self._play_loop, name=f"play-{client.client_id}", daemon=True)
+        self._player.start()
+
+    # --------------------------------------------------------------------------------- lifecycle
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        for handle in (self.folder, self.image):
+            try:
+                handle.remove()
+            except Exception:
+                pass
+        try:
+            self.client.scene.remove_by_name("/overlay")
+        except Exception:
+            pass
+
+    def request(self, *, overlay: bool = False, gui: bool = False) -> None:
+        with self._cond:
+            self._overlay_dirty |= overlay
+            self._gui_dirty |= gui
+            self._cond.notify_all()
+
+    # ------------------------------------------------------------------------------- navigation
+    def goto(self, frame: int) -> None:
+        n = self.session.n_frames
+        frame = n - 1 if frame < 0 else min(int(frame), n - 1)
+        with self._cond:
+            if frame == self.target:
+                return
+            self.direction = 1 if frame >= self.target else -1
+            self.target = frame
+            self._requested_at.setdefault(frame, time.perf_counter())
+            self._cond.notify_all()
+
+    def step(self, delta: int) -> None:
+        with self._cond:
+            target = self.target
+        self.goto(max(0, target + int(delta)))
+
+    def next_unlabelled(self) -> None:
+        f = self.session.next_unlabelled(self.target)
+        if f is not None:
+            self.goto(f)
+
+    def jump_event(self, direction: int) -> None:
+        f = self.session.next_event(self.target, direction)
+        if f is not None:
+            self.goto(f)
+
+    def set_playing(self, playing: bool) -> None:
+        self.playing = playing
+        if self.nav.play.value != playing:
+            self.nav.play.value = playing
+
+    def toggle_play(self) -> None:
+        self.set_playing(not self.playing)
+
+    def _play_loop(self) -> None:
+        while not self._closed:
+            if not self.playing:
+                time.sleep(0.05)
+                continue
+            time.sleep(1.0 / max(self.session.fps * self.speed, 1e-3))
+            if self.target >= self.session.n_frames - 1:
+                self.set_playing(False)
+            else:
+                self.step(1)
+
+    def set_mode(self, mode: str) -> None:
+        if mode not in MODES:
+            raise ValueError(f"unknown mode {mode!r}; modes: {MODES}")
+        self.mode = mode
+        if self.nav.mode.value != mode:
+            self.nav.mode.value = mode
+        self.request(overlay=True, gui=True)
+
+    def cycle_mode(self) -> None:
+        self.set_mode(MODES[(MODES.index(self.mode) + 1) % len(MODES)])
+
+    # ---------------------------------------------------------------------------------- camera
+    def fit(self, aspect: float | None = None) -> None:
+        self.fit_distance = fit_camera(self.client, self.plane, aspect=aspect)
+        self._aspect = float(aspect if aspect is not None else (self.client.camera.aspect or 0.0))
+
+    def _on_camera(self, camera) -> None:
+        aspect = float(camera.aspect or 0.0)
+        if aspect > 0 and abs(aspect - self._aspect) > 1e-3:  # canvas resized (or first real size): refit
+            self.fit(aspect)
+
+    # ---------------------------------------------------------------------------------- edits
+    def _notice(self, text: str) -> None:
+        self.session.notices.append(text)
+        self.request(gui=True)
+
+    def _edit(self, fn, *args, **kw):
+        with self.lock:
+            try:
+                return fn(*args, **kw)
+            except (ValueError, KeyError) as e:
+                self._notice(f"⚠ {e.args[0] if e.args else e}")
+                return None
+
+    @property
+    def frame(self) -> int:
+        """The frame the annotator sees (the last one rendered)."""
+        return max(self.shown, 0)
+
+    def _on_click(self, ev) -> None:
+        px = self.plane.ray_to_pixel(ev.ray_origin, ev.ray_direction)
+        if px is None:
+            return
+        self.on_pixel_click(*px)
+
+    def on_pixel_click(self, x_px: float, y_px: float) -> None:
+        """A click on the frame at pixel ``(x_px, y_px)``: ball, stationary ball or court point by mode."""
+        s, f = self.session, self.frame
+        xy = s.to_norm(x_px, y_px)
+        if self.mode == "ball":
+            self._edit(s.set_ball, f, xy, self.pending_visibility)
+            self.pending_visibility = 1
+        elif self.mode == "stationary":
+            action = self.still_panel.action.value
+            if action == "add":
+                b = self._edit(s.add_inactive, f, xy)
+                if b is not None:
+                    self.still_panel.selected.value = b
+            elif action == "move selected":
+                self._edit(s.move_inactive, f, int(self.still_panel.selected.value), xy)
+            else:
+                b = s.nearest_inactive(f, xy)
+                if b is None:
+                    self._notice("no stationary ball within 20 px of the click")
+                else:
+                    self._edit(s.remove_inactive, f, b)
+        else:
+            name = str(self.court_panel.point.value)
+            self._edit(s.set_point, name, xy)
+            nxt = self.next_court_point(after=name)
+            if nxt is not None:
+                self.court_panel.point.value = nxt
+
+    def set_visibility(self, visibility: int) -> None:
+        if not self._edit(self.session.set_visibility, self.frame, visibility) and visibility in (2, 3):
+            self.pending_visibility = visibility
+            self._notice(f"click the ball: it will be saved as {VISIBILITY_NAMES[visibility]}")
+
+    def clear_ball(self) -> None:
+        self._edit(self.session.clear_ball, self.frame)
+
+    def interpolate(self) -> None:
+        n = self._edit(self.session.interpolate, str(self.ball_panel.method.value))
+        self._notice(f"{n or 0} provisional position(s) from keyframe interpolation: accept with Y / shift+Y")
+
+    def accept_here(self) -> None:
+        self._edit(self.session.accept_ball_proposals, [self.frame], overwrite=True)
+
+    def accept_range(self, start: int | None = None, stop: int | None = None, *, overwrite: bool = False) -> None:
+        frames = None if start is None else range(start, (stop if stop is not None else start) + 1)
+        n = self._edit(self.session.accept_ball_proposals, frames, overwrite=overwrite)
+        self._notice(f"accepted {n or 0} proposal(s)")
+
+    def reject_proposals(self, frames=None) -> None:
+        self._edit(self.session.reject_ball_proposals, frames)
+
+    def event_key(self, key: int) -> None:
+        labels = self.session.event_labels
+        if key == 0:
+            self._edit(self.session.set_event, self.frame, None)
+        elif key <= len(labels):
+            self._edit(self.session.toggle_event, self.frame, labels[key - 1])
+
+    def remove_inactive(self, ball_no: int) -> None:
+        self._edit(self.session.remove_inactive, self.frame, ball_no)
+
+    def remove_point(self, name: str) -> None:
+        self._edit(self.session.remove_point, name)
+
+    def next_court_point(self, after: str | None = None) -> str | None:
+        names = self.session.court.point_names
+        start = names.index(after) + 1 if after in names else 0
+        for name in names[start:] + names[:start]:
+            if name not in self.session.points:
+                return name
+        return None
+
+    def undo(self) -> None:
+        edit = self._edit(self.session.undo)
+        self._notice(f"undid: {edit.label}" if edit else "nothing to undo")
+
+    def redo(self) -> None:
+        edit = self._edit(self.session.redo)
+        self._notice(f"redid: {edit.label}" if edit else "nothing to redo")
+
+    # ------------------------------------------------------------------------ model assistance
+    def run_detector(self, weights: str | None) -> None:
+        if self._detector_thread is not None and self._detector_thread.is_alive():
+            self._notice("the detector is already running")
+            return
+        self._detector_thread = threading.Thread(target=self._detect, args=(weights,), daemon=True)
+        self._detector_thread.start()
+
+    def _detect(self, weights: str | None) -> None:
+        from .assist import run_ball_detector
+
+        bar, info = self.assist_panel.progress, self.assist_panel.info
+        bar.visible, bar.value = True, 0.0
+        info.content = "loading the detector …"
+
+        def progress(done: int, total: int) -> None:
+            bar.value = 100.0 * done / max(total, 1)
+            info.content = f"detector: frame {done} / {total}"
+
+        try:
+            track, text = run_ball_detector(self.clip, weights, progress)
+        except Exception as e:  # shown in the GUI: a bad checkpoint must not kill the labeler
+            info.content = f"⚠ detector failed: {e}"
+            bar.visible = False
+            return
+        with self.lock:
+            self.session.set_ball_proposals(track, "ball detector")
+        info.content = text
+        bar.value, bar.visible = 100.0, False
+
+    def propose_events(self) -> None:
+        from .assist import propose_events
+
+        info = self.assist_panel.info
+        with self.lock:
+            try:
+                events = propose_events(self.session)
+            except RuntimeError as e:
+                info.content = str(e)
+                return
+            n = self.session.set_event_proposals(events)
+        info.content = f"{n} proposed event(s): accept them with 'accept events'"
+
+    def accept_events(self) -> None:
+        n = self._edit(self.session.accept_event_proposals)
+        self._notice(f"accepted {n or 0} event proposal(s)")
+
+    # ------------------------------------------------------------------------------- rendering
+    def _render_loop(self) -> None:
+        while True:
+            with self._cond:
+                while not self._closed and self.target == self.shown and not (self._overlay_dirty or self._gui_dirty):
+                    self._cond.wait(timeout=1.0)
+                    if self.target == self.shown and not self._closed:
+                        self._sync_from_disk()
+                if self._closed:
+                    return
+                frame, direction = self.target, self.direction
+                self._overlay_dirty = self._gui_dirty = False
+                requested = self._requested_at.pop(frame, None)
+                self._requested_at.clear()
+            try:
+                self._render(frame, direction)
+            except Exception as e:  # a failing frame is reported, the labeler goes on
+                self._notice(f"⚠ could not show frame {frame}: {e}")
+                self.shown = frame
+            if requested is not None:
+                self.step_times.append(time.perf_counter() - requested)
+
+    def _sync_from_disk(self) -> None:
+        with self.lock:
+            try:
+                self.session.sync()
+            except Exception as e:
+                self.session.notices.append(f"⚠ could not re-read the clip files: {e}")
+
+    def _render(self, frame: int, direction: int) -> None:
+        data = self.frames.get(frame) if frame != self.shown else None
+        with self.lock, self.client.atomic():
+            if data is not None:
+                set_image_jpeg(self.image, data)
+            self.overlay.draw(self.session, frame, mode=self.mode, trail_length=int(self.ball_panel.trail.value),
+                              show_court=bool(self.court_panel.show.value) or self.mode == "court",
+                              selected_point=str(self.court_panel.point.value) if self.mode == "court" else None)
+            self._refresh_gui(frame)
+        self.shown = frame
+        self.client.flush()
+        self.frames.prefetch(frame, direction)
+
+    def _refresh_gui(self, frame: int) -> None:
+        s = self.session
+        sm = s.summary()
+        nav = self.nav
+        if int(nav.slider.value) != frame:
+            nav.slider.value = frame
+        row = s.ball.get(frame)
+        ball = "not labelled" if row is None else VISIBILITY_NAMES[row[0]]
+        if row is not None and row[0] > 0:
+            ball += f" ({row[1] * s.width:.1f}, {row[2] * s.height:.1f}) px"
+        event = s.events.get(frame, "–")
+        nav.status.content = (
+            f"**frame {frame} / {s.n_frames - 1}** · mode **{self.mode}**  \n"
+            f"ball: {ball} · event: {event}  \n"
+            f"labelled {sm['labelled']} ({sm['labelled_pct']:.1f} %) · events {sm['events']} · "
+            f"still balls {sm['inactive_balls']} · court points {sm['court_points']}"
+        )
+        nav.notice.content = f"_{s.notices[-1]}_" if s.notices else ""
+        marks = [(f, e.split("_")[-1][:5]) for f, e in sorted(s.events.items())]
+        keys = s.keyframes()
+        if len(keys) <= MAX_KEYFRAME_MARKS:
+            marks += [(f, "") for f in keys if f not in s.events]
+        set_slider_marks(nav.slider, marks)
+        prop = s.ball_proposals.get(frame)
+        self.ball_panel.info.content = (
+            f"proposals: {sm['ball_proposals']} ({s.ball_proposal_source or 'none'})"
+            + (f" · here: ({prop[1] * s.width:.1f}, {prop[2] * s.height:.1f}) px" if prop and prop[0] else "")
+            + f"  \nkeyframes: {len(keys)}"
+        )
+        still = s.inactive_at(frame)
+        self.still_panel.info.content = "stationary balls here: " + (
+            ", ".join(f"#{b} ({x * s.width:.0f}, {y * s.height:.0f})" for b, (x, y) in sorted(still.items())) or "none")
+        ev_list = ", ".join(f"{f}: {e}" for f, e in sorted(s.events.items())[:30])
+        self.events_panel.info.content = f"{len(s.events)} event(s): {ev_list or 'none'}"
+        self.court_panel.info.content = self._court_text()
+
+    def _court_text(self) -> str:
+        s = self.session
+        if s.calibration is None:
+            return f"{len(s.points)} point(s). {s.calibration_error}"
+        cal = s.calibration
+        rows = "\n".join(f"| {n} | {cal.residuals_px[n]:.2f}{' ⚠' if n in cal.suspect else ''} |" for n in cal.names)
+        return (f"calibrated from {len(cal.names)} points, RMS **{cal.rms_px:.2f} px** (camera.yaml saved)\n\n"
+                f"| point | residual px |\n|---|---|\n{rows}")
+
+
+class LabelerApp:
+    """The labeler server for a clip or a dataset (``rally3d label``).
+
+    Args:
+        target: a clip folder, or a dataset (``manifest.yaml`` or clip sub-folders).
+        host, port: where viser listens.
+    """
+
+    def __init__(self, target: str | Path, host: str = "127.0.0.1", port: int = 8080):
+        import viser
+
+        self.clips = find_clips(target)
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        setup_server(self.server)
+        self._caches: dict[Path, FrameCache] = {}
+        self._cache_lock = threading.Lock()
+        self.views: dict[int, ClientView] = {}
+        self._pickers: dict[int, object] = {}
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.server.get_host()}:{self.server.get_port()}/"
+
+    def frame_cache(self, clip: Clip) -> FrameCache:
+        with self._cache_lock:
+            key = clip.root.resolve()
+            if key not in self._caches:
+                self._caches[key] = FrameCache(clip)
+            return self._caches[key]
+
+    def stop(self) -> None:
+        for view in list(self.views.values()):
+            view.close()
+        self.server.stop()
+        for cache in self._caches.values():
+            cache.close()
+
+    def _connect(self, client) -> None:
+        self._register_hotkeys(client)
+        if len(self.clips) > 1:
+            self._dataset_panel(client)
+        self.open(client, self.clips[0])
+
+    def _disconnect(self, client) -> None:
+        view = self.views.pop(client.client_id, None)
+        if view is not None:
+            view.close()
+
+    def open(self, client, clip: Clip) -> ClientView:
+        """Show ``clip`` in ``client``'s tab (replacing the clip it showed)."""
+        old = self.views.pop(client.client_id, None)
+        if old is not None:
+            old.close()
+        view = ClientView(self, client, clip)
+        self.views[client.client_id] = view
+        return view
+
+    def _register_hotkeys(self, client) -> None:
+        for label, key, modifier, action, arg in HOTKEYS:
+            cmd = client.gui.add_command(label, hotkey=key, modifier=modifier)
+
+            def trigger(ev, action=action, arg=arg) -> None:
+                view = self.views.get(ev.client.client_id) if ev.client is not None else None
+                if view is None:
+                    return
+                fn = getattr(view, action)
+                fn() if arg is None else fn(arg)
+
+            cmd.on_trigger(trigger)
+
+    def _dataset_panel(self, client) -> None:
+        gui = client.gui
+        with gui.add_folder("Dataset", order=0, expand_by_default=True):
+            rows = [clip_overview(c) for c in self.clips]
+            table = "| clip | frames | labelled | events | court pts |\n|---|---|---|---|---|\n" + "\n".join(
+                f"| {r['clip']} | {r.get('frames', '?')} | {r.get('labelled_pct', 0):.0f} % | {r.get('events', '?')} "
+                f"| {r.get('court_points', '?')} |" if "error" not in r else f"| {r['clip']} | ⚠ {r['error'][:60]} | | | |"
+                for r in rows)
+            gui.add_markdown(table)
+            names = [c.root.name for c in self.clips]
+            pick = gui.add_dropdown("clip", names, initial_value=names[0])
+            button = gui.add_button("open clip")
+            button.on_click(lambda ev: self.open(client, self.clips[names.index(str(pick.value))]))

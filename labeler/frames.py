@@ -1,0 +1,125 @@
+"""Frames for the browser: decode, JPEG-encode, cache and prefetch around the frames being looked at.
+
+One :class:`FrameCache` per clip, shared by every tab on it. ``get(i)`` returns the JPEG bytes of frame ``i``
+(decoding and encoding it when not cached); :meth:`FrameCache.prefetch` queues the frames the annotator is
+likely to ask for next (ahead in the stepping direction first, a few behind), which a background thread
+decodes while the annotator looks at the current one. Sequential decoding of a video is cheap; seeking
+backwards in H.264 is not, so the cache keeps a window on both sides.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict, deque
+from dataclasses import dataclass
+
+from inference.clipio import Clip, FrameSource
+
+from .viewer_common import encode_jpeg
+
+
+@dataclass
+class FrameTiming:
+    """Seconds spent decoding and encoding the last frame served without the cache (for the bench)."""
+
+    decode_s: float = 0.0
+    encode_s: float = 0.0
+
+
+class FrameCache:
+    """JPEG frames of one clip with an LRU cache and a prefetch thread.
+
+    Args:
+        clip: the clip.
+        quality: JPEG quality (85: ≈100–200 KiB per 720p frame).
+        capacity: frames kept (JPEG bytes, so 64 frames ≈ 10 MiB at 720p).
+        ahead, behind: frames prefetched in the stepping direction and against it.
+        prefetch: run the background thread (off for measuring cold decodes).
+    """
+
+    def __init__(self, clip: Clip, *, quality: int = 85, capacity: int = 96, ahead: int = 12, behind: int = 4,
+                 prefetch: bool = True):
+        self.clip = clip
+        self.quality = int(quality)
+        self.capacity = int(capacity)
+        self.ahead, self.behind = int(ahead), int(behind)
+        self.n_frames = int(clip.n_frames)
+        self._source: FrameSource = clip.frames(cache_size=0)
+        self._decode_lock = threading.Lock()
+        self._lock = threading.Lock()
+        self._jpeg: OrderedDict[int, bytes] = OrderedDict()
+        self._queue: deque[int] = deque()
+        self._wake = threading.Condition(self._lock)
+        self._stopped = False
+        self.last = FrameTiming()
+        self._thread = None
+        if prefetch:
+            self._thread = threading.Thread(target=self._worker, name=f"prefetch-{clip.root.name}", daemon=True)
+            self._thread.start()
+
+    def close(self) -> None:
+        with self._wake:
+            self._stopped = True
+            self._wake.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=2)
+        with self._decode_lock:
+            self._source.close()
+
+    def cached(self, index: int) -> bool:
+        with self._lock:
+            return index in self._jpeg
+
+    def get(self, index: int) -> bytes:
+        """JPEG bytes of frame ``index`` (cached, or decoded and encoded now)."""
+        index = int(index)
+        if not 0 <= index < self.n_frames:
+            raise IndexError(f"frame {index} is outside the clip (0..{self.n_frames - 1})")
+        with self._lock:
+            data = self._jpeg.get(index)
+            if data is not None:
+                self._jpeg.move_to_end(index)
+                return data
+        return self._load(index)
+
+    def _load(self, index: int) -> bytes:
+        with self._decode_lock:
+            with self._lock:  # another thread may have produced it while we waited
+                if index in self._jpeg:
+                    return self._jpeg[index]
+            t0 = time.perf_counter()
+            rgb = self._source.read(index)
+            t1 = time.perf_counter()
+            data = encode_jpeg(rgb, self.quality)
+            self.last = FrameTiming(t1 - t0, time.perf_counter() - t1)
+        with self._lock:
+            self._jpeg[index] = data
+            self._jpeg.move_to_end(index)
+            while len(self._jpeg) > self.capacity:
+                self._jpeg.popitem(last=False)
+        return data
+
+    def prefetch(self, index: int, direction: int = 1) -> None:
+        """Queue the frames around ``index`` (``direction`` = +1 forward, -1 backward) for decoding."""
+        step = 1 if direction >= 0 else -1
+        wanted = [index + step * k for k in range(1, self.ahead + 1)]
+        wanted += [index - step * k for k in range(1, self.behind + 1)]
+        wanted = [i for i in wanted if 0 <= i < self.n_frames]
+        with self._wake:
+            self._queue = deque(i for i in wanted if i not in self._jpeg)
+            self._wake.notify_all()
+
+    def _worker(self) -> None:
+        while True:
+            with self._wake:
+                while not self._queue and not self._stopped:
+                    self._wake.wait()
+                if self._stopped:
+                    return
+                index = self._queue.popleft()
+                if index in self._jpeg:
+                    continue
+            try:
+                self._load(index)
+            except Exception:  # a broken frame is reported when it is actually asked for
+                pass

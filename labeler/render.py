@@ -1,0 +1,174 @@
+"""State → overlay geometry on the frame (pure functions), and pushing it to a client's scene.
+
+Overlays are line segments and points lying just in front of the image plane (z < 0 is towards the camera),
+so the frame's JPEG never has to be re-encoded for an overlay change and stays cacheable. Geometry is built
+in image pixels and mapped to the scene by :class:`labeler.viewer_common.ImagePlane`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .state import LabelSession
+from .viewer_common import ImagePlane
+
+OVERLAY_Z = -0.002
+"""Scene z of the overlays (in front of the frame, seen from the camera on -z)."""
+
+COLORS = {
+    1: (80, 255, 80),      # visible
+    2: (255, 230, 40),     # hard to see
+    3: (255, 60, 255),     # occluded
+    "proposal": (40, 220, 255),
+    "trail": (255, 255, 255),
+    "inactive": (150, 120, 255),
+    "point": (255, 255, 0),
+    "reprojected": (0, 255, 255),
+    "residual": (255, 40, 40),
+    "paint": (255, 255, 255),
+    "net": (255, 220, 0),
+    "glass": (120, 200, 255),
+    "mesh": (170, 170, 170),
+}
+
+
+def ring(center_px, radius_px: float, n: int = 20) -> np.ndarray:
+    """``(n, 2, 2)`` pixel segments of a circle around ``center_px``."""
+    a = np.linspace(0, 2 * math.pi, n + 1)
+    pts = np.stack([center_px[0] + radius_px * np.cos(a), center_px[1] + radius_px * np.sin(a)], axis=1)
+    return np.stack([pts[:-1], pts[1:]], axis=1)
+
+
+def cross(center_px, half_px: float) -> np.ndarray:
+    """``(2, 2, 2)`` pixel segments of an × around ``center_px``."""
+    x, y = center_px
+    return np.array([[[x - half_px, y - half_px], [x + half_px, y + half_px]],
+                     [[x - half_px, y + half_px], [x + half_px, y - half_px]]], dtype=float)
+
+
+def clip_segments(seg: np.ndarray, width: float, height: float) -> np.ndarray:
+    """Clip ``(L, 2, 2)`` pixel segments to the image rectangle (Liang–Barsky); drops outside / NaN ones."""
+    seg = np.asarray(seg, dtype=float).reshape(-1, 2, 2)
+    seg = seg[np.isfinite(seg).all(axis=(1, 2))]
+    p0, d = seg[:, 0], seg[:, 1] - seg[:, 0]
+    t0, t1 = np.zeros(len(seg)), np.ones(len(seg))
+    for p, q in ((-d[:, 0], p0[:, 0]), (d[:, 0], width - p0[:, 0]), (-d[:, 1], p0[:, 1]), (d[:, 1], height - p0[:, 1])):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = q / p
+        parallel = p == 0
+        t0 = np.where(~parallel & (p < 0), np.maximum(t0, r), t0)
+        t1 = np.where(~parallel & (p > 0), np.minimum(t1, r), t1)
+        t0 = np.where(parallel & (q < 0), 2.0, t0)  # parallel and outside
+    keep = t0 < t1
+    return np.stack([p0 + t0[:, None] * d, p0 + t1[:, None] * d], axis=1)[keep]
+
+
+def court_segments(camera, court, samples: int = 8) -> dict[str, np.ndarray]:
+    """The court YAML's line layers (paint, net, glass, mesh) reprojected: layer → ``(L, 2, 2)`` pixels.
+
+    Each 3D segment is split into ``samples`` pieces so lens distortion bends it, then clipped to the image.
+    """
+    w, h = camera.image_size
+    out = {}
+    for layer, segs in court.lines.items():
+        t = np.linspace(0.0, 1.0, samples + 1)
+        pts = segs[:, :1, :] + t[None, :, None] * (segs[:, 1:, :] - segs[:, :1, :])  # (L, S+1, 3)
+        px = camera.project(pts.reshape(-1, 3)).reshape(len(segs), samples + 1, 2)
+        pieces = np.stack([px[:, :-1], px[:, 1:]], axis=2).reshape(-1, 2, 2)
+        out[layer] = clip_segments(pieces, w, h)
+    return out
+
+
+def residual_segments(session: LabelSession) -> tuple[np.ndarray, np.ndarray]:
+    """Clicked court points and their reprojections: ``(N, 2)`` clicked pixels, ``(N, 2)`` reprojected pixels."""
+    size = np.array([session.width, session.height], float)
+    names = list(session.points)
+    clicked = np.array([session.points[n] for n in names], float).reshape(-1, 2) * size
+    if session.calibration is None or not names:
+        return clicked, np.full_like(clicked, np.nan)
+    reproj = session.calibration.camera.project(session.court.point_array(names))
+    return clicked, reproj
+
+
+class Overlay:
+    """Draws a session's annotations of the current frame into one client's scene (call inside ``atomic()``)."""
+
+    def __init__(self, scene, plane: ImagePlane, root: str = "/overlay"):
+        self.scene, self.plane, self.root = scene, plane, root
+        self._handles: dict[str, object] = {}
+
+    def _scene_segments(self, seg_px: np.ndarray) -> np.ndarray:
+        seg = np.asarray(seg_px, float).reshape(-1, 2)
+        return self.plane.pixel_to_scene(seg, z=OVERLAY_Z).reshape(-1, 2, 3).astype(np.float32)
+
+    def lines(self, name: str, seg_px: np.ndarray, color, thickness: float = 2.0) -> None:
+        """Replace the line layer ``name`` (hide it when ``seg_px`` is empty)."""
+        path = f"{self.root}/{name}"
+        seg_px = np.asarray(seg_px, float).reshape(-1, 2, 2)
+        handle = self._handles.get(path)
+        if not len(seg_px):
+            if handle is not None and handle.visible:
+                handle.visible = False
+            return
+        self._handles[path] = self.scene.add_line_segments(
+            path, self._scene_segments(seg_px), colors=color, thickness=thickness, thickness_units="screen")
+
+    def clear(self, name: str) -> None:
+        self.lines(name, np.empty((0, 2, 2)), (0, 0, 0))
+
+    def draw(self, session: LabelSession, frame: int, *, mode: str, trail_length: int = 15,
+             show_court: bool = True, selected_point: str | None = None) -> None:
+        """All overlays of ``frame``: ball, proposal, trail, stationary balls, court model and residuals."""
+        size = np.array([session.width, session.height], float)
+        r = max(6.0, 0.008 * session.width)
+        row = session.ball.get(frame)
+        if row is not None and row[0] > 0:
+            self.lines("ball", ring(np.array(row[1:]) * size, r), COLORS[row[0]], 2.5)
+        else:
+            self.clear("ball")
+        prop = session.ball_proposals.get(frame)
+        if prop is not None and prop[0] > 0:
+            c = np.array(prop[1:]) * size
+            self.lines("proposal", np.concatenate([ring(c, r * 1.4, 12)[::2], cross(c, r * 0.5)]),
+                       COLORS["proposal"], 2.0)
+        else:
+            self.clear("proposal")
+        trail = session.trail(frame, trail_length)
+        if len(trail) >= 2:
+            px = trail[:, 1:] * size
+            self.lines("trail", np.stack([px[:-1], px[1:]], axis=1), COLORS["trail"], 1.5)
+        else:
+            self.clear("trail")
+        still = session.inactive_at(frame)
+        if still:
+            segs = np.concatenate([cross(np.array(xy) * size, r * 0.7) for xy in still.values()])
+            self.lines("inactive", segs, COLORS["inactive"], 2.5)
+        else:
+            self.clear("inactive")
+        self._court(session, show_court or mode == "court", selected_point, r)
+
+    def _court(self, session: LabelSession, show: bool, selected: str | None, r: float) -> None:
+        if not show:
+            for name in ("court_paint", "court_net", "court_glass", "court_mesh", "points", "reprojected",
+                         "residuals", "selected"):
+                self.clear(name)
+            return
+        if session.calibration is not None:
+            for layer, segs in court_segments(session.calibration.camera, session.court).items():
+                self.lines(f"court_{layer}", segs, COLORS.get(layer, (255, 255, 255)), 1.5)
+        else:
+            for layer in ("paint", "net", "glass", "mesh"):
+                self.clear(f"court_{layer}")
+        clicked, reproj = residual_segments(session)
+        pts = [ring(c, r * 0.6, 8) for c in clicked]
+        self.lines("points", np.concatenate(pts) if pts else np.empty((0, 2, 2)), COLORS["point"], 2.0)
+        ok = np.isfinite(reproj).all(axis=1)
+        rep = [cross(c, r * 0.4) for c in reproj[ok]]
+        self.lines("reprojected", np.concatenate(rep) if rep else np.empty((0, 2, 2)), COLORS["reprojected"], 2.0)
+        self.lines("residuals", np.stack([clicked[ok], reproj[ok]], axis=1), COLORS["residual"], 2.0)
+        if selected and session.calibration is not None and selected in session.court.points:
+            guess = session.calibration.camera.project(session.court.points[selected][None])[0]
+            self.lines("selected", ring(guess, r * 1.2, 16), COLORS["reprojected"], 1.0)
+        else:
+            self.clear("selected")
