@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from inference.clipio import BallTrack, Clip
+from inference.clipio import BallTrack, Clip, FormatError
 from inference.models.checkpoint import load_weights
 from inference.models.registry import build_model
 
@@ -42,6 +42,7 @@ class DetectionResult:
     seconds_network: float
     seconds_total: float
     n_frames: int
+    truncated: str | None = None  # why decoding stopped before the video's reported end, if it did
 
     @property
     def fps(self) -> float:
@@ -121,22 +122,44 @@ class BallDetectorRunner:
             flush()
         return maps, seconds
 
-    def run(self, clip: Clip, progress: bool = False) -> DetectionResult:
-        """Detect and track the ball over the whole clip (original-frame pixels)."""
+    def run(self, clip: Clip, progress: bool = False, tolerate_truncation: bool = False) -> DetectionResult:
+        """Detect and track the ball over the whole clip (original-frame pixels).
+
+        With ``tolerate_truncation`` a video that stops decoding early yields the frames before the damage
+        (``result.truncated`` says why) instead of raising :class:`FormatError`.
+        """
         from tqdm import tqdm
 
         t0 = time.perf_counter()
         info = clip.info
         lb = Letterbox(info.width, info.height, self.net_size[1], self.net_size[0])
+        truncated: list[str] = []
+        count = 0
         with clip.frames(cache_size=0) as src:
             n = len(src)
-            frames = (lb.warp(f) for f in tqdm(src.iter(), total=n, desc=f"detect {clip.root.name}",
-                                               unit="frame", disable=not progress))
-            maps, seconds_net = self.heatmaps(frames)
+            bar = tqdm(total=n, desc=f"detect {clip.root.name}", unit="frame", disable=not progress)
+
+            def decoded():
+                nonlocal count
+                try:
+                    for frame in src.iter():
+                        count += 1
+                        bar.update()
+                        yield lb.warp(frame)
+                except FormatError as e:  # a truncated or damaged video: keep what was decoded
+                    if not tolerate_truncation:
+                        raise
+                    truncated.append(str(e))
+
+            maps, seconds_net = self.heatmaps(decoded())
+            bar.close()
+            if truncated:
+                n = count
         candidates = []
         for i in range(n):
             per_window = [heatmaps_to_candidates(m[None], lb, self.postprocess)[0] for m in maps.get(i, [])]
             candidates.append(pool_candidates(per_window) if per_window else FrameCandidates.empty())
         tracked = track_candidates(candidates, info.fps, self.tracker, (info.width, info.height))
         track = tracked.to_ball_track(info.width, info.height)
-        return DetectionResult(candidates, tracked, track, seconds_net, time.perf_counter() - t0, n)
+        return DetectionResult(candidates, tracked, track, seconds_net, time.perf_counter() - t0, n,
+                               truncated[0] if truncated else None)

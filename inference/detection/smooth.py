@@ -1,0 +1,202 @@
+"""Rauch–Tung–Striebel smoothing of a 2D ball track that respects bounces and hits.
+
+A constant-acceleration Kalman filter runs over each *piece* of the track; a piece ends where the track
+cannot be one smooth flight: a gap longer than ``max_gap_s``, a known event frame (a bounce or a hit from
+``events.csv``), or a change point found by the filter itself (a measurement far outside the predicted
+gate that the next measurement confirms). An isolated measurement outside the gate that the next one
+does not confirm is an outlier and is dropped (its row becomes "not visible"). Each piece is then
+smoothed backwards (RTS), so the positions of a flight use the frames after them as well as before.
+
+Units are pixels of the original frame; the defaults are for 1280-px-wide video and scale with width.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from inference.clipio import BallTrack
+
+GATE_CHI2_2DOF = 13.8  # chi-square 99.9 % with 2 degrees of freedom
+
+
+@dataclass(frozen=True)
+class SmootherConfig:
+    """Parameters of :func:`smooth_track`.
+
+    Attributes:
+        meas_sigma_px: σ of a detection's position at 1280 px width (scaled with the frame width).
+        jerk_psd: spectral density of the white jerk, px²/s⁵ at 1280 px (how fast acceleration may change).
+        max_gap_s: a longer gap without detections starts a new piece.
+        gate_chi2: normalised innovation squared above which a measurement does not fit the flight.
+        min_piece: pieces with fewer detections are left unsmoothed (kept as measured).
+    """
+
+    meas_sigma_px: float = 2.5
+    jerk_psd: float = 4.0e7
+    max_gap_s: float = 0.25
+    gate_chi2: float = GATE_CHI2_2DOF
+    min_piece: int = 4
+
+    def __post_init__(self) -> None:
+        for name in ("meas_sigma_px", "jerk_psd", "max_gap_s", "gate_chi2"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(f"SmootherConfig.{name} must be a positive number, got {v!r}")
+        if self.min_piece < 1:
+            raise ValueError(f"SmootherConfig.min_piece must be ≥ 1, got {self.min_piece}")
+
+
+@dataclass
+class SmoothResult:
+    """A smoothed track and how it was cut.
+
+    Attributes:
+        track: the smoothed :class:`BallTrack` (same frames and visibility, outliers set to 0).
+        pieces: ``(P, 2)`` int, first and last frame of each smoothed piece.
+        outliers: ``(K,)`` int, frames whose detection was dropped.
+    """
+
+    track: BallTrack
+    pieces: np.ndarray
+    outliers: np.ndarray
+
+
+def _model(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-acceleration transition F (3×3) and white-jerk process noise Q (3×3) for one axis."""
+    F = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    Q = q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6],
+                      [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                      [dt**3 / 6, dt**2 / 2, dt]])
+    return F, Q
+
+
+class _AxisPair:
+    """Kalman filter over both image axes (independent, identical models): state (3, 2) = [p, v, a] × [u, v]."""
+
+    def __init__(self, z0: np.ndarray, r: float, q: float, fps: float):
+        self.r, self.q, self.fps = r, q, fps
+        self.x = np.zeros((3, 2))
+        self.x[0] = z0
+        self.P = np.diag([r, 1e7, 1e9])  # velocity/acceleration unknown at the start
+
+    def predict(self, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        F, Q = _model(steps / self.fps, self.q)
+        return F @ self.x, F @ self.P @ F.T + Q, F, Q
+
+    def nis(self, z: np.ndarray, x_pred: np.ndarray, P_pred: np.ndarray) -> float:
+        s = P_pred[0, 0] + self.r
+        return float(np.sum((z - x_pred[0]) ** 2) / s)
+
+    def update(self, z: np.ndarray, x_pred: np.ndarray, P_pred: np.ndarray) -> None:
+        s = P_pred[0, 0] + self.r
+        k = P_pred[:, 0] / s
+        self.x = x_pred + np.outer(k, z - x_pred[0])
+        self.P = P_pred - np.outer(k, P_pred[0])
+
+
+def _smooth_piece(frames: np.ndarray, z: np.ndarray, r: float, q: float, fps: float) -> np.ndarray:
+    """RTS-smoothed positions ``(N, 2)`` of one piece (frames increasing, measurements ``z (N, 2)``)."""
+    n = len(frames)
+    kf = _AxisPair(z[0], r, q, fps)
+    xs_f, Ps_f, xs_p, Ps_p, Fs = [kf.x.copy()], [kf.P.copy()], [None], [None], [None]
+    for i in range(1, n):
+        x_pred, P_pred, F, _ = kf.predict(int(frames[i] - frames[i - 1]))
+        kf.update(z[i], x_pred, P_pred)
+        xs_f.append(kf.x.copy())
+        Ps_f.append(kf.P.copy())
+        xs_p.append(x_pred)
+        Ps_p.append(P_pred)
+        Fs.append(F)
+    xs = [None] * n
+    xs[-1], P_next = xs_f[-1], Ps_f[-1]
+    for i in range(n - 2, -1, -1):
+        C = Ps_f[i] @ Fs[i + 1].T @ np.linalg.inv(Ps_p[i + 1])
+        xs[i] = xs_f[i] + C @ (xs[i + 1] - xs_p[i + 1])
+        P_next = Ps_f[i] + C @ (P_next - Ps_p[i + 1]) @ C.T
+    return np.array([x[0] for x in xs])
+
+
+def split_pieces(frames: np.ndarray, z: np.ndarray, fps: float, cfg: SmootherConfig, r: float, q: float,
+                 breaks: np.ndarray) -> tuple[list[np.ndarray], list[int]]:
+    """Cut measurement indices into flights; returns (pieces as index arrays, outlier indices)."""
+    pieces: list[list[int]] = []
+    outliers: list[int] = []
+    max_gap = max(1, int(round(cfg.max_gap_s * fps)))
+    breaks = set(int(b) for b in breaks)
+    cur: list[int] = []
+    kf: _AxisPair | None = None
+    i = 0
+    n = len(frames)
+    while i < n:
+        if kf is None:
+            cur, kf = [i], _AxisPair(z[i], r, q, fps)
+            i += 1
+            continue
+        gap = int(frames[i] - frames[cur[-1]])
+        crossed = any(frames[cur[-1]] < b <= frames[i] for b in breaks)
+        if gap > max_gap or crossed:  # a long gap or a known contact: the next detection starts a new flight
+            pieces.append(cur)
+            kf = None
+            continue
+        x_pred, P_pred, _, _ = kf.predict(gap)
+        if len(cur) >= 3 and kf.nis(z[i], x_pred, P_pred) > cfg.gate_chi2:
+            # outlier or change point? an outlier is one bad measurement that the next one does not follow
+            if i + 1 < n and frames[i + 1] - frames[cur[-1]] <= max_gap:
+                x2, P2, _, _ = kf.predict(int(frames[i + 1] - frames[cur[-1]]))
+                if kf.nis(z[i + 1], x2, P2) <= cfg.gate_chi2:
+                    outliers.append(i)
+                    i += 1
+                    continue
+            pieces.append(cur)
+            kf = None
+            continue
+        kf.update(z[i], x_pred, P_pred)
+        cur.append(i)
+        i += 1
+    if cur:
+        pieces.append(cur)
+    return [np.asarray(p) for p in pieces], outliers
+
+
+def smooth_track(track: BallTrack, width: int, height: int, fps: float,
+                 cfg: SmootherConfig | None = None, event_frames=()) -> SmoothResult:
+    """Smooth the positions of ``track`` (normalised coordinates) flight by flight.
+
+    Args:
+        track: rows with visibility 1–3 carry measurements; visibility 0 rows are kept as they are.
+        width, height: frame size in pixels; fps: frames per second.
+        cfg: smoother settings (defaults for 1280-px video).
+        event_frames: frames of known contacts (bounces, hits): the smoother never smooths across them.
+
+    Returns:
+        :class:`SmoothResult`; ``track`` has the same frames and visibility codes except dropped outliers.
+    """
+    cfg = cfg or SmootherConfig()
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+    scale = width / 1280.0
+    r = (cfg.meas_sigma_px * scale) ** 2
+    q = cfg.jerk_psd * scale**2
+    x = np.array(track.xy[:, 0], dtype=float, copy=True)
+    y = np.array(track.xy[:, 1], dtype=float, copy=True)
+    vis = np.array(track.visibility, copy=True)
+    seen = np.flatnonzero((vis > 0) & np.isfinite(x) & np.isfinite(y))
+    frames = np.asarray(track.frame)[seen]
+    z = np.stack([x[seen] * width, y[seen] * height], axis=1) if len(seen) else np.zeros((0, 2))
+    pieces, out = split_pieces(frames, z, fps, cfg, r, q, np.asarray(list(event_frames), dtype=np.int64))
+    spans = []
+    for p in pieces:
+        if len(p) >= cfg.min_piece:
+            zs = _smooth_piece(frames[p], z[p], r, q, fps)
+            x[seen[p]] = zs[:, 0] / width
+            y[seen[p]] = zs[:, 1] / height
+        spans.append((int(frames[p[0]]), int(frames[p[-1]])))
+    for i in out:
+        vis[seen[i]] = 0
+        x[seen[i]] = np.nan
+        y[seen[i]] = np.nan
+    xy = np.clip(np.stack([x, y], axis=1), 0.0, 1.0)
+    smoothed = BallTrack(frame=track.frame, visibility=vis, xy=xy)
+    return SmoothResult(smoothed, np.asarray(spans, dtype=np.int64).reshape(-1, 2),
+                        np.asarray([int(frames[i]) for i in out], dtype=np.int64))

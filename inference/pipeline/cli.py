@@ -1,0 +1,129 @@
+"""``rally3d infer``: a video (or clip folder, or dataset) → ball.csv, events.csv, players.csv, ball_3d.csv."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+STAGE_NAMES = ("camera", "detect", "smooth", "events", "players", "reconstruct")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "infer",
+        help="run the whole pipeline on a video or clip: ball, hit events, players, 3D (writes a clip folder)",
+        description="Streams the video through the ball detector (batched), smooths the track (RTS, cut at "
+        "bounces), decodes hit events, estimates players when a pose backend is available and reconstructs "
+        "the 3D ball. Stages whose inputs did not change are skipped on a re-run; files the pipeline did not "
+        "write are never overwritten without --overwrite. Several inputs or a dataset folder (manifest.yaml) "
+        "run through Lightning's predict loop (--devices/--strategy ddp spread clips over GPUs).",
+    )
+    p.add_argument("inputs", type=Path, nargs="+", metavar="VIDEO_OR_CLIP",
+                   help="a video file, a clip folder (clip.yaml) or a dataset folder (manifest.yaml)")
+    p.add_argument("--court", help="padel or tennis (or a court YAML); needed for a video, read from clip.yaml otherwise")
+    p.add_argument("--camera", type=Path, help="camera.yaml of this video's camera")
+    p.add_argument("--court-points", type=Path, help="court_points.csv clicked on this video (calibrated here)")
+    p.add_argument("--out", type=Path, help="output clip folder (a video: default runs/infer/<stem>; a clip: in "
+                   "place); with several inputs, the parent folder of one clip folder each")
+    p.add_argument("--detector", type=Path, help="ball-detector checkpoint (default: the shipped weights)")
+    p.add_argument("--detector-model", choices=["wasb", "tracknetv2", "monotrack"], default="wasb")
+    p.add_argument("--events", type=Path, help="hit-event model file (default: the shipped model of the sport)")
+    p.add_argument("--pose", default="auto", help="pose backend: auto (MoveNet if installed), none, movenet, "
+                   "rtmpose, rtmo")
+    p.add_argument("--pose-model", type=Path, help="model file of the pose backend")
+    p.add_argument("--method", default="joint", help="3D reconstruction method (default joint)")
+    p.add_argument("--batch-size", type=int, default=4, help="detector windows per forward pass (default 4)")
+    p.add_argument("--step", type=int, default=3, help="detector window step in frames (default 3)")
+    p.add_argument("--device", default="cpu", help="cpu or cuda (single clip)")
+    p.add_argument("--only", help=f"comma-separated stages to run ({', '.join(STAGE_NAMES)}); the others are reused")
+    p.add_argument("--overwrite", action="store_true", help="replace files the pipeline did not write (backed up)")
+    p.add_argument("--reference", type=Path, help="clip with annotations / ground truth to score against "
+                   "(default: the input clip when --out writes elsewhere)")
+    p.add_argument("--split", help="with a dataset folder: only this split")
+    p.add_argument("--accelerator", default="auto", help="several clips: Lightning accelerator (default auto)")
+    p.add_argument("--devices", default="1", help="several clips: Lightning devices (default 1)")
+    p.add_argument("--strategy", default="auto", help="several clips: Lightning strategy (e.g. ddp)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def _config(args: argparse.Namespace):
+    from .stages import PipelineConfig
+
+    return PipelineConfig(detector=args.detector_model, detector_weights=args.detector, step=args.step,
+                          batch_size=args.batch_size, events=args.events, pose=args.pose,
+                          pose_model=args.pose_model, method=args.method, device=args.device,
+                          overwrite=args.overwrite, progress=not args.no_progress)
+
+
+def _expand(args: argparse.Namespace) -> list[tuple[Path, Path | None]]:
+    """(input, output) per clip; dataset folders expand to their clips."""
+    from inference.clipio import Manifest
+
+    items: list[tuple[Path, Path | None]] = []
+    for path in args.inputs:
+        if path.is_dir() and (path / "manifest.yaml").is_file():
+            items += [(Path(c), None) for c in Manifest.load(path).paths(args.split)]
+        else:
+            items.append((path, None))
+    if len(items) > 1 and args.out is not None:
+        items = [(src, args.out / (src.stem if src.is_file() else src.name)) for src, _ in items]
+    elif args.out is not None:
+        items = [(items[0][0], args.out)]
+    return items
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = _config(args)
+    items = _expand(args)
+    if not items:
+        raise ValueError("no clips to run (empty dataset or split)")
+    if args.only:
+        unknown = sorted(set(args.only.split(",")) - set(STAGE_NAMES))
+        if unknown:
+            raise ValueError(f"unknown stages {unknown}; choose from {', '.join(STAGE_NAMES)}")
+    if len(items) == 1:
+        return _run_one(items[0], cfg, args)
+    from .engine import predict_clips
+
+    devices = int(args.devices) if str(args.devices).isdigit() else args.devices
+    results = predict_clips(items, cfg, court=args.court, camera=args.camera, court_points=args.court_points,
+                            accelerator=args.accelerator, devices=devices, strategy=args.strategy)
+    failed = 0
+    for r in results:
+        print(f"\n== {r['input']} → {r.get('clip', '-')}: {'ok' if r['ok'] else 'INCOMPLETE'}")
+        print(r.get("table") or r.get("error", ""))
+        failed += not r["ok"]
+    print(f"\n{len(results) - failed}/{len(results)} clips complete")
+    return 1 if failed else 0
+
+
+def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> int:
+    from inference.clipio import Clip
+
+    from .prepare import prepare
+    from .run import run_pipeline
+    from .score import score
+
+    source, out = item
+    prepared = prepare(source, out, args.court, args.camera, args.court_points)
+    clip = prepared.clip
+    print(f"rally3d infer: {source} → {clip.root} ({clip.info.width}×{clip.info.height}, {clip.info.fps:g} fps, "
+          f"{clip.n_frames} frames)")
+    only = set(args.only.split(",")) if args.only else None
+    report = run_pipeline(clip, cfg, only=only)
+    print()
+    print(report.table())
+    reference = Clip(args.reference) if args.reference else prepared.reference
+    if reference is not None:
+        lines = score(clip, reference).lines()
+        if lines:
+            print(f"\nagainst {reference.root}:")
+            print("\n".join("  " + line for line in lines))
+    if report.ok:
+        print(f"\nwrote {clip.root}  (review it: rally3d review {clip.root})")
+        return 0
+    bad = [s for s in report.stages if s.status in ("failed", "partial", "skipped", "blocked") and s.name != "players"]
+    print(f"\nincomplete: {', '.join(f'{s.name} {s.status}' for s in bad)}; partial results kept in {clip.root}",
+          file=sys.stderr)
+    return 1

@@ -1,0 +1,128 @@
+"""Turn what the user gives ``rally3d infer`` (a video file or a clip folder) into the clip folder it writes.
+
+* a **video**: a new clip folder (``--out``, default ``runs/infer/<video stem>``) whose ``clip.yaml`` points at
+  the video (relative path; the video is not copied) with the size, frame rate and frame count read from it;
+* a **clip folder** without ``--out``: the clip itself (results are written beside its files);
+* a **clip folder** with ``--out``: a new clip folder pointing at the same video, with the calibration inputs
+  (``court_points.csv``, ``camera.yaml``) copied, but *not* the annotations — so the original can serve as the
+  reference the results are scored against.
+
+``--camera`` and ``--court-points`` files are copied in after checking that they fit the video.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from inference.camera import Camera
+from inference.clipio import Clip, ClipInfo, FormatError
+from inference.clipio.frames import VIDEO_FIX, FrameSource
+
+VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"}
+
+
+@dataclass
+class Prepared:
+    """The clip folder to write and where it came from.
+
+    Attributes:
+        clip: the output clip folder (``clip.yaml`` written).
+        source: the input path (video or clip folder).
+        reference: a clip with annotations or ground truth to score against, if any.
+    """
+
+    clip: Clip
+    source: Path
+    reference: Clip | None = None
+
+
+def is_clip_folder(path: Path) -> bool:
+    return path.is_dir() and (path / "clip.yaml").is_file()
+
+
+def probe_video(path: Path) -> tuple[int, int, float, int]:
+    """(width, height, fps, n_frames) of a video file; a clear :class:`FormatError` if it cannot be read."""
+    if not path.is_file():
+        raise FormatError(path, "video file not found", fix="check the path")
+    with FrameSource.open(path, cache_size=0) as src:  # decodes frame 0: a corrupt file fails here
+        if not src.fps or src.fps <= 0:
+            raise FormatError(path, "the video does not state its frame rate", fix=VIDEO_FIX)
+        return src.width, src.height, float(src.fps), len(src)
+
+
+def prepare(source: Path, out: Path | None, court: str | None, camera: Path | None = None,
+            court_points: Path | None = None) -> Prepared:
+    """Create or reuse the clip folder for ``source`` (see the module docstring)."""
+    source = Path(source)
+    if is_clip_folder(source):
+        src_clip = Clip(source)
+        info = src_clip.info
+        if court and court != info.sport:
+            raise ValueError(f"{src_clip.clip_yaml_path}: the clip is {info.sport!r} but --court {court!r} was "
+                             "given; leave --court out or fix clip.yaml")
+        if out is None or Path(out).resolve() == source.resolve():
+            clip, reference = src_clip, None
+        else:
+            clip = _new_clip(Path(out), info, src_clip.video_path)
+            for name in ("court_points.csv", "camera.yaml"):
+                if (source / name).is_file() and not (clip.root / name).exists():
+                    shutil.copy2(source / name, clip.root / name)
+            reference = src_clip
+    elif source.suffix.lower() in VIDEO_SUFFIXES or source.is_file():
+        if not court:
+            raise ValueError(f"{source}: a video needs --court (padel or tennis, or a court YAML path)")
+        width, height, fps, n = probe_video(source)
+        out = Path(out) if out is not None else Path("runs/infer") / source.stem
+        info = ClipInfo(sport=Path(court).stem if court.endswith(".yaml") else court, fps=fps, width=width,
+                        height=height, video="video.mp4", n_frames=n, source=str(source))
+        if court.endswith(".yaml"):
+            info.court = os.path.relpath(Path(court).resolve(), out.resolve())
+        clip, reference = _new_clip(out, info, source), None
+    else:
+        raise FileNotFoundError(f"{source}: neither a video file nor a clip folder (with clip.yaml)")
+    if camera is not None:
+        _install_camera(clip, Path(camera))
+    if court_points is not None:
+        _install_court_points(clip, Path(court_points))
+    return Prepared(clip, source, reference)
+
+
+def _new_clip(out: Path, info: ClipInfo, video: Path) -> Clip:
+    """A clip folder at ``out`` whose clip.yaml points (relatively) at ``video``."""
+    out.mkdir(parents=True, exist_ok=True)
+    rel = os.path.relpath(Path(video).resolve(), out.resolve())
+    new = ClipInfo(**{**{k: v for k, v in info.to_dict().items() if k in ClipInfo.__dataclass_fields__},
+                      "video": rel, "extra": {}})
+    if (out / "clip.yaml").is_file():
+        old = Clip(out).info
+        if old.video != new.video or (old.width, old.height) != (new.width, new.height):
+            raise FileExistsError(f"{out}/clip.yaml belongs to another video ({old.video}); choose another --out")
+    return Clip.create(out, new, exist_ok=True)
+
+
+def _install_camera(clip: Clip, path: Path) -> None:
+    cam = Camera.load(path)  # clear FormatError on a malformed file
+    check_camera_size(cam, clip, path)
+    if path.resolve() != clip.camera_path.resolve():
+        clip.write_camera(cam)
+
+
+def _install_court_points(clip: Clip, path: Path) -> None:
+    if path.resolve() == clip.court_points_path.resolve():
+        return
+    from inference.clipio import read_court_points_csv
+
+    clip.write_court_points(read_court_points_csv(path))
+
+
+def check_camera_size(cam: Camera, clip: Clip, path: Path | None = None) -> None:
+    """Refuse a calibration made for another frame size (the projection would be wrong everywhere)."""
+    size = tuple(int(v) for v in cam.image_size) if getattr(cam, "image_size", None) is not None else None
+    if size is not None and size != (clip.info.width, clip.info.height):
+        raise FormatError(path or clip.camera_path,
+                          f"the calibration is for {size[0]}×{size[1]} frames but the video is "
+                          f"{clip.info.width}×{clip.info.height}",
+                          fix="calibrate this video (court_points.csv + rally3d calibrate) or pass the right "
+                              "--camera")

@@ -1,0 +1,283 @@
+"""The stages of ``rally3d infer``, each a small function over the clip folder.
+
+Each stage declares the files it reads (its *inputs*, fingerprinted for resuming), its parameters and the
+files it writes. A stage that cannot run says why: :class:`Skip` (an optional input is absent — e.g. no
+calibration, no pose backend) or :class:`StageError` (bad input: the message names the file and the fix).
+
+Order: camera → detect → smooth → events → players → reconstruct. The camera comes first because it is
+cheap and a calibration that does not fit the video must stop the run before the expensive detection.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from inference.clipio import Clip
+from inference.court import Court
+
+from .state import STATE_DIR, RunState
+
+
+class Skip(Exception):
+    """The stage does not apply to this clip (its reason is shown in the summary)."""
+
+
+class StageError(RuntimeError):
+    """The stage failed on bad input; the message names the file and the fix."""
+
+
+@dataclass
+class PipelineConfig:
+    """What ``rally3d infer`` runs with.
+
+    Attributes:
+        detector: ``wasb``, ``tracknetv2`` or ``monotrack``; detector_weights: checkpoint (None: shipped).
+        step: detector window step (frames); batch_size: windows per forward pass.
+        events: hit-event checkpoint (None: the shipped model of the clip's sport).
+        pose: pose backend (``auto``: MoveNet if installed, ``none``: no players, or a backend name).
+        pose_model: model file for the pose backend (None: its default).
+        method: 3D reconstruction method.
+        device: ``cpu`` or ``cuda[:i]``.
+        overwrite: replace files that the pipeline did not write (a backup is kept).
+        progress: show progress bars.
+    """
+
+    detector: str = "wasb"
+    detector_weights: Path | None = None
+    step: int = 3
+    batch_size: int = 4
+    events: Path | None = None
+    pose: str = "auto"
+    pose_model: Path | None = None
+    method: str = "joint"
+    device: str = "cpu"
+    overwrite: bool = False
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.step < 1 or self.batch_size < 1:
+            raise ValueError(f"step and batch_size must be ≥ 1, got {self.step}, {self.batch_size}")
+
+
+@dataclass
+class Context:
+    """What the stages share while one clip runs."""
+
+    clip: Clip
+    court: Court
+    cfg: PipelineConfig
+    state: RunState
+    notes: dict[str, str] = field(default_factory=dict)
+
+    def given_camera(self) -> bool:
+        """Whether camera.yaml was supplied by the user (not computed by this pipeline)."""
+        path = self.clip.camera_path
+        return path.is_file() and not self.state.written_by_pipeline(path)
+
+    @property
+    def detected_path(self) -> Path:
+        """The detector's raw track (before smoothing), kept so smoothing can be re-run alone."""
+        return self.clip.root / STATE_DIR / "ball_detected.csv"
+
+    def n_frames(self) -> int:
+        return self.clip.n_frames
+
+
+@dataclass
+class Outcome:
+    """What a stage did: frames it processed (for frames/s) and a note for the summary."""
+
+    frames: int = 0
+    note: str = ""
+    partial: bool = False  # the stage wrote results but they do not cover the whole clip
+
+
+@dataclass
+class Stage:
+    """One step: ``inputs(ctx)`` role → file, ``params(ctx)``, ``outputs(ctx)`` files, ``run(ctx)`` → Outcome."""
+
+    name: str
+    inputs: Callable[[Context], dict[str, Path | None]]
+    params: Callable[[Context], dict[str, Any]]
+    outputs: Callable[[Context], list[Path]]
+    run: Callable[[Context], Outcome]
+    requires: tuple[str, ...] = ()  # stages whose success this one needs
+
+
+# ------------------------------------------------------------------------------------------- camera
+def _camera_inputs(ctx: Context) -> dict[str, Path | None]:
+    given = ctx.clip.camera_path if ctx.given_camera() else None
+    return {"court_points": ctx.clip.court_points_path, "camera": given, "clip_yaml": ctx.clip.clip_yaml_path}
+
+
+def _camera_run(ctx: Context) -> Outcome:
+    from inference.calibration import calibrate_court
+
+    from .prepare import check_camera_size
+
+    clip = ctx.clip
+    if ctx.given_camera():
+        check_camera_size(clip.read_camera(), clip)
+        return Outcome(note="camera.yaml given")
+    if clip.court_points_path.is_file():
+        points = clip.read_court_points(known_names=ctx.court.point_names)
+        size = np.array([clip.info.width, clip.info.height], dtype=float)
+        result = calibrate_court(ctx.court, {n: xy * size for n, xy in zip(points.names, points.xy)},
+                                 (clip.info.width, clip.info.height))
+        clip.write_camera(result.camera)
+        return Outcome(note=f"calibrated from {len(result.names)} court points, RMS {result.rms_px:.2f} px")
+    raise Skip("no calibration: pass --camera camera.yaml or --court-points court_points.csv (3D is skipped)")
+
+
+def _camera_outputs(ctx: Context) -> list[Path]:
+    return [] if ctx.given_camera() or not ctx.clip.court_points_path.is_file() else [ctx.clip.camera_path]
+
+
+# ------------------------------------------------------------------------------------------- detect
+def _weights_path(ctx: Context) -> Path:
+    from inference.detection.detect import SHIPPED
+
+    w = ctx.cfg.detector_weights or SHIPPED.get(ctx.cfg.detector)
+    if w is None:
+        raise StageError(f"no shipped weights for the {ctx.cfg.detector} detector: pass --detector CKPT")
+    w = Path(w)
+    if not w.is_file():
+        raise StageError(f"{w}: detector weights not found — pass the path of a checkpoint with --detector "
+                         "(weights are never downloaded)")
+    return w
+
+
+def _detect_run(ctx: Context) -> Outcome:
+    from inference.clipio import write_ball_csv
+    from inference.detection.detect import BallDetectorRunner
+
+    runner = BallDetectorRunner.from_weights(ctx.cfg.detector, _weights_path(ctx), step=ctx.cfg.step,
+                                             batch_size=ctx.cfg.batch_size, device=ctx.cfg.device)
+    runner.model.to(ctx.cfg.device)
+    result = runner.run(ctx.clip, progress=ctx.cfg.progress, tolerate_truncation=True)
+    ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)
+    write_ball_csv(ctx.detected_path, result.track)
+    seen = int(np.sum(result.track.visibility > 0))
+    note = f"ball in {seen}/{result.n_frames} frames"
+    if result.truncated:
+        ctx.notes["detect"] = result.truncated
+        return Outcome(result.n_frames, f"{note}; video truncated: {result.truncated}", partial=True)
+    if seen == 0:
+        raise StageError(f"{ctx.clip.video_path}: no ball detected in any of {result.n_frames} frames — check "
+                         "the video shows a rally, or pass other --detector weights")
+    return Outcome(result.n_frames, note)
+
+
+# ------------------------------------------------------------------------------------------- smooth
+def _smooth_run(ctx: Context) -> Outcome:
+    from inference.clipio import read_ball_csv
+    from inference.detection.smooth import smooth_track
+
+    raw = read_ball_csv(ctx.detected_path)
+    info = ctx.clip.info
+    res = smooth_track(raw, info.width, info.height, info.fps)
+    ctx.clip.write_ball(res.track)
+    return Outcome(len(raw), f"{len(res.pieces)} pieces, {len(res.outliers)} outliers dropped")
+
+
+# ------------------------------------------------------------------------------------------- events
+def _events_run(ctx: Context) -> Outcome:
+    try:
+        from inference.events import EventDetector
+    except ImportError as e:  # pragma: no cover - the package ships with inference
+        raise StageError(f"the hit-event model is unavailable ({e})") from e
+    clip = ctx.clip
+    camera = clip.read_camera() if clip.camera_path.is_file() else None
+    players = clip.read_players(missing_ok=True) if clip.players_path.is_file() else None
+    if ctx.cfg.events is not None and not Path(ctx.cfg.events).is_file():
+        raise StageError(f"{ctx.cfg.events}: hit-event checkpoint not found — pass an existing file with --events")
+    det = EventDetector.from_checkpoint(ctx.cfg.events, sport=clip.info.sport)
+    frames = clip.frames(cache_size=16)
+    try:
+        result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
+                             players=players if players is not None and len(players) else None, frames=frames)
+    finally:
+        frames.close()
+    clip.write_events(result.events)
+    counts: dict[str, int] = {}
+    for e in result.events.event:
+        counts[str(e)] = counts.get(str(e), 0) + 1
+    if not len(result.events):
+        raise StageError(f"{clip.ball_path}: no hit events found, so the flights cannot be cut — check ball.csv "
+                         "(label or re-detect the ball) or pass another --events model")
+    return Outcome(clip.n_frames, f"{len(result.events)} events (" +
+                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")")
+
+
+# ------------------------------------------------------------------------------------------ players
+def _players_run(ctx: Context) -> Outcome:
+    from inference.players.backends import make_backend
+    from inference.players.tracking import TrackingConfig, players_from_poses
+
+    clip = ctx.clip
+    if not clip.camera_path.is_file():
+        raise Skip("no calibration (players are placed on court through the camera)")
+    name = ctx.cfg.pose
+    if name == "none":
+        raise Skip("--pose none")
+    backend = make_backend("movenet" if name == "auto" else name, model=ctx.cfg.pose_model,
+                           pose_model=ctx.cfg.pose_model)
+    ok, reason = backend.available()
+    if not ok:
+        if name == "auto":
+            raise Skip(f"no pose backend available ({reason})")
+        raise StageError(f"pose backend {name!r}: {reason}")
+    poses = backend.run(clip, progress=ctx.cfg.progress)
+    players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig())
+    clip.write_players(players)
+    return Outcome(len(poses), f"{len(players.ids())} players")
+
+
+# -------------------------------------------------------------------------------------- reconstruct
+def _reconstruct_run(ctx: Context) -> Outcome:
+    from inference.reconstruct.api import reconstruct
+    from inference.reconstruct.observations import Observations
+
+    clip = ctx.clip
+    if not clip.camera_path.is_file():
+        raise Skip("no calibration")
+    obs = Observations.from_clip(clip, court=ctx.court)
+    if len(obs.event_frames) < 2:
+        raise StageError(f"{clip.events_path}: needs at least two events to reconstruct a flight")
+    fit = reconstruct(obs, ctx.cfg.method)
+    fit.save(clip)
+    ok = sum(s.ok for s in fit.segments)
+    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights", partial=ok < len(fit.segments))
+
+
+def _file(name: str) -> Callable[[Context], Path]:
+    return lambda ctx: ctx.clip.root / name
+
+
+def build_stages() -> list[Stage]:
+    """The stages of ``rally3d infer`` in order."""
+    video = lambda ctx: ctx.clip.video_path  # noqa: E731
+    camera = _file("camera.yaml")
+    return [
+        Stage("camera", _camera_inputs, lambda ctx: {"court": str(ctx.clip.court_path())}, _camera_outputs,
+              _camera_run),
+        Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx)},
+              lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
+              lambda ctx: [ctx.detected_path], _detect_run),
+        Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v1"},
+              lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
+        Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
+                                     "weights": ctx.cfg.events},
+              lambda ctx: {"sport": ctx.clip.info.sport}, lambda ctx: [ctx.clip.events_path], _events_run,
+              requires=("smooth",)),
+        Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
+              lambda ctx: {"pose": ctx.cfg.pose}, lambda ctx: [ctx.clip.players_path], _players_run),
+        Stage("reconstruct", lambda ctx: {"ball": ctx.clip.ball_path, "events": ctx.clip.events_path,
+                                          "camera": camera(ctx), "players": ctx.clip.players_path},
+              lambda ctx: {"method": ctx.cfg.method},
+              lambda ctx: [ctx.clip.ball_3d_path, ctx.clip.segments_path], _reconstruct_run,
+              requires=("events",)),
+    ]

@@ -1,0 +1,78 @@
+"""Resumable runs: what each stage consumed and produced, kept in ``<clip>/.rally3d/pipeline.json``.
+
+A stage is skipped when its *key* (the fingerprints of its input files plus its parameters) equals the
+recorded one and its outputs still have the recorded fingerprints. Outputs that exist but were not
+written by the pipeline (hand annotations, say) are never overwritten silently.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from inference.clipio.atomic import atomic_write_text
+
+STATE_DIR = ".rally3d"
+STATE_FILE = "pipeline.json"
+_HASH_LIMIT = 64 << 20  # larger files (videos) are fingerprinted by size and modification time
+
+
+def fingerprint(path: Path) -> str | None:
+    """A fingerprint of a file's content (sha256; size+mtime for files over 64 MiB); None if missing."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    st = path.stat()
+    if st.st_size > _HASH_LIMIT:
+        return f"size:{st.st_size}:mtime:{st.st_mtime_ns}"
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return "sha256:" + h.hexdigest()
+
+
+def stage_key(inputs: dict[str, Path | None], params: dict[str, Any]) -> str:
+    """Key of one stage run: fingerprints of its inputs (by role) and its parameters."""
+    blob = json.dumps({"inputs": {k: fingerprint(p) if p is not None else None for k, p in sorted(inputs.items())},
+                       "params": params}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+class RunState:
+    """The pipeline record of one clip folder."""
+
+    def __init__(self, clip_root: Path):
+        self.root = Path(clip_root)
+        self.path = self.root / STATE_DIR / STATE_FILE
+        self.stages: dict[str, dict[str, Any]] = {}
+        if self.path.is_file():
+            try:
+                self.stages = json.loads(self.path.read_text()).get("stages", {})
+            except (json.JSONDecodeError, AttributeError):
+                self.stages = {}  # a damaged record only costs a re-run
+
+    def is_current(self, stage: str, key: str, outputs: list[Path]) -> bool:
+        """Whether ``stage`` already ran with this key and its outputs are unchanged since."""
+        rec = self.stages.get(stage)
+        if not rec or rec.get("key") != key or rec.get("status") != "done":
+            return False
+        written = rec.get("outputs", {})
+        return all(written.get(p.name) == fingerprint(p) is not None for p in outputs) and \
+            all(fingerprint(p) is not None for p in outputs)
+
+    def written_by_pipeline(self, path: Path) -> bool:
+        """Whether ``path`` is missing or is exactly what some stage of the pipeline wrote there."""
+        fp = fingerprint(path)
+        if fp is None:
+            return True
+        return any(rec.get("outputs", {}).get(path.name) == fp for rec in self.stages.values())
+
+    def record(self, stage: str, key: str, status: str, outputs: list[Path], seconds: float,
+               note: str = "") -> None:
+        """Remember a stage's result and save the record atomically."""
+        self.stages[stage] = {"key": key, "status": status, "seconds": round(seconds, 3), "note": note,
+                              "outputs": {p.name: fingerprint(p) for p in outputs}}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.path, json.dumps({"stages": self.stages}, indent=2, sort_keys=True) + "\n")
