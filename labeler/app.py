@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import threading
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -113,15 +114,13 @@ class ClientView:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-        for handle in (self.folder, self.image):
-            try:
-                handle.remove()
-            except Exception:
-                pass
-        try:
-            self.client.scene.remove_by_name("/overlay")
-        except Exception:
-            pass
+        with warnings.catch_warnings():  # a disconnected client's handles are already gone
+            warnings.simplefilter("ignore")
+            for handle in (self.folder, self.image, *self.overlay.handles()):
+                try:
+                    handle.remove()
+                except Exception:
+                    pass
 
     def request(self, *, overlay: bool = False, gui: bool = False) -> None:
         with self._cond:

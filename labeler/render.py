@@ -98,6 +98,9 @@ class Overlay:
         self.scene, self.plane, self.root = scene, plane, root
         self._handles: dict[str, object] = {}
 
+    def handles(self) -> list:
+        return list(self._handles.values())
+
     def _scene_segments(self, seg_px: np.ndarray) -> np.ndarray:
         seg = np.asarray(seg_px, float).reshape(-1, 2)
         return self.plane.pixel_to_scene(seg, z=OVERLAY_Z).reshape(-1, 2, 3).astype(np.float32)

@@ -89,11 +89,11 @@ def fit_camera(client, plane: ImagePlane, fov_deg: float = DEFAULT_FOV_DEG, marg
     if aspect is None:
         aspect = float(getattr(client.camera, "aspect", 0.0) or 0.0)
     d = fit_distance(plane, aspect, fov_deg, margin)
-    with client.atomic():
+    with client.atomic():  # order matters: position, then look_at, then up (up first leaves a blank view)
         client.camera.fov = math.radians(fov_deg)
-        client.camera.up_direction = (0.0, -1.0, 0.0)
-        client.camera.look_at = (0.0, 0.0, 0.0)
         client.camera.position = (0.0, 0.0, -d)
+        client.camera.look_at = (0.0, 0.0, 0.0)
+        client.camera.up_direction = (0.0, -1.0, 0.0)
     return d
 
 

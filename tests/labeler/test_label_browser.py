@@ -1,0 +1,123 @@
+"""End to end in headless Chromium: click the ball, press event keys, place court points, reload, two tabs."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import yaml
+from conftest import WEBGL_CANVAS, dismiss_toasts, wait_until
+from label_helpers import SAMPLE, copy_sample
+
+from inference.camera import Camera
+from inference.clipio import Clip
+from labeler.app import LabelerApp
+from labeler.viewer_common import screen_of_pixel
+
+pytestmark = pytest.mark.browser
+
+COURT_POINTS = ["far_left", "far_right", "near_service_left", "near_service_right", "net_post_left_top",
+                "net_post_right_top", "glass_far_left_top"]
+
+
+@pytest.fixture
+def app_and_clip(tmp_path, port):
+    clip = copy_sample(tmp_path / "clip", keep_labels=False)
+    app = LabelerApp(clip, port=port)
+    yield app, clip
+    app.stop()
+
+
+def ready_view(app, page, known: set[int] = frozenset()):
+    """The new tab's view, once its camera is fitted to the canvas and its first frame is shown."""
+    wait_until(lambda: set(app.views) - set(known), what="the tab's labeler view")
+    view = app.views[max(set(app.views) - set(known))]
+    box = page.locator(WEBGL_CANVAS).bounding_box()
+    wait_until(lambda: abs(view._aspect - box["width"] / box["height"]) < 1e-3, what="the camera fit to the canvas")
+    wait_until(lambda: view.shown >= 0, what="the first frame")
+    time.sleep(0.8)  # the client applies the camera pose
+    dismiss_toasts(page, wait_s=0.3)
+    return view
+
+
+def click_pixel(page, view, xy_px) -> None:
+    box = page.locator(WEBGL_CANVAS).bounding_box()
+    sx, sy = screen_of_pixel(np.asarray(xy_px, float)[None], view.plane, box["width"], box["height"],
+                             view.fit_distance)[0]
+    page.mouse.click(box["x"] + sx, box["y"] + sy)
+    time.sleep(0.06)  # viser throttles clicks to 20 ms, latest wins
+
+
+def press(page, key: str, times: int = 1) -> None:
+    for _ in range(times):
+        page.keyboard.press(key)
+        time.sleep(0.03)
+
+
+def test_label_ball_event_court_points_and_reload(app_and_clip, viser_page):
+    app, clip_dir = app_and_clip
+    clip = Clip(clip_dir)
+    size = np.array([1280.0, 720.0])
+    gt_ball = Clip(SAMPLE).read_ball()
+    page = viser_page(app.server.get_port())
+    view = ready_view(app, page)
+
+    press(page, "l", 3)  # next frame ×3 (hotkey L; auto-repeat coalesces)
+    wait_until(lambda: view.shown == 3, what="frame 3 after three L presses")
+    target = gt_ball.xy[3] * size
+    click_pixel(page, view, target)
+    wait_until(lambda: clip.ball_path.exists(), what="ball.csv")
+    saved = clip.read_ball()
+    assert saved.frame.tolist() == [3] and saved.visibility.tolist() == [1]
+    assert np.abs(saved.xy[0] * size - target).max() < 1.0, (saved.xy[0] * size, target)
+
+    press(page, "1")  # first event of the padel vocabulary
+    wait_until(lambda: clip.events_path.exists(), what="events.csv")
+    events = clip.read_events()
+    assert events.frame.tolist() == [3] and events.event.tolist() == [view.session.event_labels[0]] == ["ground"]
+
+    press(page, "m", 2)  # ball → stationary → court
+    wait_until(lambda: view.mode == "court", what="court mode")
+    gt_points = Clip(SAMPLE).read_court_points().as_dict()
+    for name in COURT_POINTS:
+        view.court_panel.point.value = name
+        n_before = len(view.session.points)
+        click_pixel(page, view, np.array(gt_points[name]) * size)
+        wait_until(lambda: len(view.session.points) == n_before + 1, what=f"court point {name}")
+    points = clip.read_court_points()
+    assert set(points.names) == set(COURT_POINTS)
+    for name, xy in points.as_dict().items():
+        assert np.abs((np.array(xy) - gt_points[name]) * size).max() < 1.0, name
+    wait_until(lambda: clip.camera_path.exists(), what="camera.yaml")
+    cam = Camera.load(clip.camera_path)
+    assert cam.rms_px is not None and cam.rms_px < 2.0
+    assert np.linalg.norm(cam.centre - Camera.load(clip_dir / "gt" / "camera.yaml").centre) < 0.5
+    assert set(yaml.safe_load(clip.camera_path.read_text())["points_used"]) == set(COURT_POINTS)
+
+    old = set(app.views)
+    page.reload(wait_until="load")
+    page.wait_for_selector(WEBGL_CANVAS, timeout=30_000)
+    view2 = ready_view(app, page, known=old)
+    assert view2 is not view and view2.session.summary()["court_points"] == 7
+    status = "labelled 1 (0.4 %) · events 1 · still balls 0 · court points 7"
+    wait_until(lambda: status in page.inner_text("body"), what="the same counts after a reload")
+    assert view2.session.calibration is not None  # the court model is drawn again from the saved points
+
+
+def test_two_tabs_on_one_clip_keep_both_edits(app_and_clip, viser_page):
+    app, clip_dir = app_and_clip
+    clip = Clip(clip_dir)
+    page_a = viser_page(app.server.get_port())
+    view_a = ready_view(app, page_a)
+    page_b = viser_page(app.server.get_port())
+    view_b = ready_view(app, page_b, known={id_ for id_, v in app.views.items() if v is view_a})
+    click_pixel(page_a, view_a, (400.0, 300.0))  # both tabs on frame 0 … then B on frame 1
+    wait_until(lambda: clip.ball_path.exists(), what="tab A's ball.csv")
+    press(page_b, "l")
+    wait_until(lambda: view_b.shown == 1, what="tab B on frame 1")
+    click_pixel(page_b, view_b, (500.0, 320.0))
+    wait_until(lambda: len(clip.read_ball()) == 2, what="both tabs' rows in ball.csv")
+    assert clip.read_ball().frame.tolist() == [0, 1]
+    # B picked A's row up (idle re-read) or merged it when saving; either way it says so
+    wait_until(lambda: "saved by another tab" in page_b.inner_text("body"), what="tab B telling it took A's row")
+    wait_until(lambda: 1 in view_a.session.ball, what="tab A picking up B's row")
