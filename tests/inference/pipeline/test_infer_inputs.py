@@ -1,0 +1,108 @@
+"""``rally3d infer`` on bad inputs: clear message, partial results kept, exit code non-zero; resuming."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inference.cli import main
+from inference.clipio import Clip, write_frames_folder, write_video
+
+SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample" / "padel_sample"
+
+
+def _blank_clip(root: Path, n: int = 9, frames_folder: bool = False) -> Path:
+    """A padel clip of grey frames (no ball) with the sample's court points."""
+    root.mkdir(parents=True)
+    frames = [np.full((720, 1280, 3), 90, np.uint8) for _ in range(n)]
+    if frames_folder:
+        write_frames_folder(root / "frames", frames)
+        video = "frames/"
+    else:
+        write_video(root / "video.mp4", frames, fps=30.0)
+        video = "video.mp4"
+    (root / "clip.yaml").write_text(f"sport: padel\nfps: 30\nwidth: 1280\nheight: 720\nvideo: {video}\n")
+    shutil.copy(SAMPLE / "court_points.csv", root / "court_points.csv")
+    return root
+
+
+def test_corrupt_video_is_named_with_a_fix(tmp_path, capsys):
+    bad = tmp_path / "rally.mp4"
+    bad.write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(range(256)) * 40)
+    code = main(["infer", str(bad), "--court", "padel", "--out", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "rally.mp4" in err and "re-encode" in err
+
+
+def test_video_needs_a_court(tmp_path, capsys):
+    code = main(["infer", str(SAMPLE / "video.mp4"), "--out", str(tmp_path / "o"), "--no-progress"])
+    assert code == 1 and "--court" in capsys.readouterr().err
+
+
+def test_calibration_of_another_frame_size_stops_before_detection(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c")
+    cam = Clip(SAMPLE).read_camera(gt=True)
+    from dataclasses import replace
+
+    other = replace(cam, image_size=(1920, 1080))
+    other.save(tmp_path / "camera_1080.yaml")
+    code = main(["infer", str(clip), "--camera", str(tmp_path / "camera_1080.yaml"), "--no-progress", "--pose", "none"])
+    out = capsys.readouterr()
+    assert code == 1
+    assert "1920×1080" in out.err + out.out and "1280×720" in out.err + out.out
+    assert not (clip / "camera.yaml").exists()
+
+
+def test_missing_detector_weights(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c")
+    code = main(["infer", str(clip), "--detector", str(tmp_path / "nope.pth.tar"), "--no-progress", "--pose", "none"])
+    out = capsys.readouterr()
+    assert code == 1
+    assert "nope.pth.tar" in out.out and "never downloaded" in out.out
+    assert (clip / "camera.yaml").is_file()  # the calibration (done before) is kept
+
+
+def test_no_detections_keeps_partial_results(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c")
+    code = main(["infer", str(clip), "--no-progress", "--pose", "none"])
+    out = capsys.readouterr()
+    assert code == 1
+    assert "no ball detected" in out.out
+    assert (clip / "camera.yaml").is_file()
+    assert "reconstruct  blocked" in out.out
+
+
+def test_truncated_frames_keep_the_decoded_part(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c", n=12, frames_folder=True)
+    (clip / "frames" / "000007.jpg").write_bytes(b"not a jpeg")
+    code = main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera,detect,smooth"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "truncated" in out and "000007.jpg" in out
+    ball = Clip(clip).read_ball()
+    assert ball.frame.max() == 6  # frames 0..6 decoded and kept
+
+
+def test_hand_annotations_are_never_overwritten(tmp_path, capsys):
+    clip = tmp_path / "annotated"
+    shutil.copytree(SAMPLE, clip)
+    before = (clip / "ball.csv").read_bytes()
+    code = main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera,smooth"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert (clip / "ball.csv").read_bytes() == before
+    assert "--out" in out or "detect" in out
+
+
+def test_resume_skips_unchanged_stages(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c")
+    main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera"])
+    capsys.readouterr()
+    main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera"])
+    assert "camera       cached" in capsys.readouterr().out
+    (clip / "court_points.csv").write_text((clip / "court_points.csv").read_text().replace("0.", "0.0", 1))
+    main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera"])
+    assert "camera       done" in capsys.readouterr().out
