@@ -72,8 +72,8 @@ def clips_from_folder(root: str | Path, split: str) -> list[SimClip]:
     for path in Manifest.load(root).paths(split):
         clip = Clip(path)
         info = clip.info
-        n = clip.n_frames if (clip.root / info.video).exists() else None
         ball = clip.read_ball()
+        n = info.n_frames or (clip.n_frames if (clip.root / info.video).exists() else None)
         n = n or (int(ball.frame[-1]) + 1 if len(ball) else 0)
         gt_events = clip.gt_dir / "events.csv"
         events = clip.read_events(gt=gt_events.is_file())
@@ -195,24 +195,22 @@ def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg
     if features.velocity:
         x[:, :, 2:4] = torch.einsum("bij,bwj->bwi", A, x[:, :, 2:4])
     y = torch.where(mirror, mirror_perm[y], y)
-    # drops and corruptions of the ball columns
-    for b in range(B):
-        names = OPS[int(op[b])]
-        rows = None
-        if any(n.endswith("block") for n in names):
-            a = int(torch.randint(0, max(W - cfg.block, 1), (1,), generator=gen))
-            rows = torch.arange(a, min(a + cfg.block, W))
-        elif any(n.endswith("frac") for n in names):
-            rows = torch.nonzero(torch.rand(W, generator=gen) < cfg.frac).flatten()
-        if rows is None or len(rows) == 0:
-            continue
-        if any(n.startswith("drop") for n in names):
-            x[b, rows[:, None], torch.tensor(ball_cols)[None]] = 0.0
-        else:
-            x[b, rows, 0:2] = 1.0 + torch.rand(len(rows), 2, generator=gen)
-            if features.velocity:
-                x[b, rows, 2:4] = torch.randn(len(rows), 2, generator=gen) * 0.1
-                x[b, rows, 4] = 1.0
+    # drops and corruptions of the ball columns (vectorised: a (B, W) mask of affected frames)
+    names = [OPS[int(o)] for o in op]
+    is_block = torch.tensor([any(n.endswith("block") for n in ns) for ns in names])
+    is_frac = torch.tensor([any(n.endswith("frac") for n in ns) for ns in names])
+    is_drop = torch.tensor([any(n.startswith("drop") for n in ns) for ns in names])
+    start = torch.randint(0, max(W - cfg.block, 1), (B, 1), generator=gen)
+    steps = torch.arange(W)[None]
+    rows = (is_block[:, None] & (steps >= start) & (steps < start + cfg.block)) | (
+        is_frac[:, None] & (torch.rand(B, W, generator=gen) < cfg.frac))
+    drop = rows & is_drop[:, None]
+    corrupt = rows & ~is_drop[:, None]
+    x[:, :, ball_cols] = torch.where(drop[..., None], 0.0, x[:, :, ball_cols])
+    x[:, :, 0:2] = torch.where(corrupt[..., None], 1.0 + torch.rand(B, W, 2, generator=gen), x[:, :, 0:2])
+    if features.velocity:
+        x[:, :, 2:4] = torch.where(corrupt[..., None], torch.randn(B, W, 2, generator=gen) * 0.1, x[:, :, 2:4])
+        x[:, :, 4] = torch.where(corrupt, 1.0, x[:, :, 4])
     return x, y
 
 

@@ -77,6 +77,8 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
     from training.run import build
 
     log.info("config:\n%s", OmegaConf.to_yaml(cfg, resolve=False))
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))  # small GRUs: one thread is fastest on a shared CPU
     dm, module, trainer = build(cfg)
     metrics: dict[str, float] = {}
     dev = bool(cfg.trainer.get("fast_dev_run"))
@@ -130,6 +132,8 @@ def evaluate_events(cfg: DictConfig) -> dict[str, float]:
     path = Path(cfg.ckpt_path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} not found")
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
     dm = hydra.utils.instantiate(cfg.data, _convert_="all")
     det = load_detector(path, cfg, dm)
     scores, table = event_tables(det, dm, f"{det.kind} ({path.name})", split=cfg.get("split", "test"))
