@@ -1,0 +1,52 @@
+"""End-to-end frames/s per stage of ``rally3d infer`` on a 1280×720 clip (the embedded padel sample).
+
+Runs the whole pipeline (camera, detect, smooth, events, players with MoveNet, reconstruct) into a fresh
+output folder, prints the per-stage table with the slowest stage named, and the scores against the sample's
+ground truth. With ``--device cuda`` it measures the GPU (where one is lent).
+
+    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 4]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE = ROOT / "datasets" / "sample" / "padel_sample"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--pose", default="movenet")
+    ap.add_argument("--batch-size", type=int, default=4)
+    ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_pipeline")
+    args = ap.parse_args()
+
+    from inference.clipio import Clip
+    from inference.pipeline import PipelineConfig, prepare, run_pipeline, score
+
+    if args.out.exists():
+        shutil.rmtree(args.out)
+    prepared = prepare(SAMPLE, args.out, None)
+    cfg = PipelineConfig(pose=args.pose, device=args.device, batch_size=args.batch_size, progress=False)
+    report = run_pipeline(prepared.clip, cfg, log=lambda *_: None)
+    import torch
+
+    print(f"rally3d infer on {SAMPLE.name}: {prepared.clip.info.width}×{prepared.clip.info.height}, "
+          f"{prepared.clip.n_frames} frames; device {args.device}, {os.cpu_count()} CPU cores, "
+          f"torch {torch.__version__}, {platform.processor() or platform.machine()}")
+    print(report.table())
+    total = sum(s.seconds for s in report.stages)
+    print(f"end to end: {prepared.clip.n_frames / total:.2f} frames/s")
+    for line in score(prepared.clip, Clip(SAMPLE)).lines():
+        print("  " + line)
+    return 0 if report.ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
