@@ -45,13 +45,14 @@ test: venv chromium
 test-all: venv chromium
 	$(PY) -m pytest -q
 
+# The main job on the embedded sample: the whole pipeline with the shipped weights (scored against the sample's
+# ground truth), an export of the replay, then the 3D review served until Ctrl-C (SERVE=0: do not serve).
+SERVE ?= 1
 demo: venv
-	rm -rf $(DEMO) && mkdir -p $(DEMO) && cp -r $(SAMPLE) $(DEMO)/
-	$(VENV)/bin/rally3d check $(DEMO)/padel_sample
-	$(VENV)/bin/rally3d calibrate $(DEMO)/padel_sample
-	$(VENV)/bin/rally3d players $(DEMO)/padel_sample --pose movenet
-	$(VENV)/bin/rally3d reconstruct $(DEMO)/padel_sample
-	$(VENV)/bin/rally3d eval-3d $(DEMO)/padel_sample --methods gravity,players,joint --noise 0 --camera clip --players clip
+	rm -rf $(DEMO) && mkdir -p $(DEMO)
+	$(VENV)/bin/rally3d infer $(SAMPLE) --out $(DEMO)/padel_sample
+	$(VENV)/bin/rally3d review $(DEMO)/padel_sample --export $(DEMO)/review
+	@if [ "$(SERVE)" = 1 ]; then $(VENV)/bin/rally3d review $(DEMO)/padel_sample; fi
 
 sample: venv
 	$(PY) -m training.synth.sample datasets/sample

@@ -106,3 +106,15 @@ def test_resume_skips_unchanged_stages(tmp_path, capsys):
     (clip / "court_points.csv").write_text((clip / "court_points.csv").read_text().replace("0.", "0.0", 1))
     main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera"])
     assert "camera       done" in capsys.readouterr().out
+
+
+def test_several_clips_go_through_lightnings_predict_loop(tmp_path, capsys):
+    a, b = _blank_clip(tmp_path / "a"), _blank_clip(tmp_path / "b", n=6)
+    code = main(["infer", str(a), str(b), "--out", str(tmp_path / "out"), "--no-progress", "--pose", "none",
+                 "--accelerator", "cpu"])
+    out = capsys.readouterr().out
+    assert code == 1  # grey frames: no ball, so both are incomplete
+    assert out.count("INCOMPLETE") == 2 and "0/2 clips complete" in out
+    for name in ("a", "b"):
+        assert (tmp_path / "out" / name / "camera.yaml").is_file()
+        assert (tmp_path / "out" / name / ".rally3d" / "pipeline.json").is_file()
