@@ -14,6 +14,7 @@ Example (non-blocking, e.g. in tests or ``make demo``)::
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from pathlib import Path
@@ -95,9 +96,9 @@ class Session:
         self.players = PlayerNodes(client.scene)
         gui = client.gui
         self.presets = camera_presets(d.camera, d.court)
-        self.info = populate_info(gui, app.frames.get(self.playback.frame), d.analysis, d.summary())
         self.panel = populate_playback(gui, d.first_frame, d.last_frame, d.event_marks())
         self.views = populate_cameras(gui, list(self.presets))
+        self.info = populate_info(gui, app.frames.get(self.playback.frame), d.analysis, d.summary())
         self.dl_replay, self.dl_csv = populate_export(gui)
         self._syncing = False
         self._wire()
@@ -242,7 +243,8 @@ class ReviewApp:
             for s in list(self.sessions.values()):
                 try:
                     s.tick(dt)
-                except Exception:  # a viewer that went away mid-update
+                except Exception as e:  # a viewer that went away mid-update
+                    print(f"rally3d review: dropping viewer {s.client.client_id}: {e!r}", file=sys.stderr)
                     self.sessions.pop(s.client.client_id, None)
 
     def serve_forever(self) -> None:

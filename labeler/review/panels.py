@@ -40,7 +40,7 @@ def speed_of(label: str) -> float:
 
 def populate_cameras(gui, names: list[str]) -> object:
     """One button per camera preset; returns the button group (its value is the preset's name)."""
-    with gui.add_folder("Camera"):
+    with gui.add_folder("Camera presets"):
         return gui.add_button_group("view", tuple(names))
 
 

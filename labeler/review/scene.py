@@ -26,7 +26,7 @@ LINE_RGB = {"paint": (255, 255, 255), "net": (30, 30, 30), "glass": (150, 210, 2
 TEAM_RGB = {"near": (230, 70, 70), "far": (150, 70, 230), "": (200, 200, 200)}
 CALL_RGB = {"in": (40, 200, 60), "out": (230, 40, 40), "fault": (230, 40, 40), "-": (160, 160, 160)}
 SURFACE_RGB = (90, 200, 230)
-DISPLAY_BALL_RADIUS = 0.09
+DISPLAY_BALL_RADIUS = 0.12
 """The ball is drawn at least this big (m) so it stays visible from the broadcast camera."""
 TRAIL_FRAMES = 20
 

@@ -1,0 +1,83 @@
+"""E2E: `rally3d review` on the reconstructed sample in headless Chromium — press play, screenshot, and check
+by pixel colours that the court floor and the ball are visible and that the ball moved.
+
+``REVIEW_SCREENSHOT=docs/img/review.png pytest tests/labeler/review/test_review_browser.py`` also saves the
+README screenshot.
+"""
+from __future__ import annotations
+
+import os
+import time
+
+import cv2
+import numpy as np
+import pytest
+from conftest import WEBGL_CANVAS, dismiss_toasts, wait_until
+from review_fixtures import reconstructed_clip  # noqa: F401  (fixture)
+
+from labeler.review.app import ReviewApp
+
+pytestmark = pytest.mark.browser
+
+
+def rgb_of(png: bytes) -> np.ndarray:
+    return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].astype(int)
+
+
+def floor_mask(img: np.ndarray) -> np.ndarray:
+    """The padel floor: saturated blue (shaded), unlike viser's white/grey UI."""
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    return (b > r + 60) & (b > g + 30)
+
+
+def ball_mask(img: np.ndarray) -> np.ndarray:
+    """The ball's yellow-green (200, 255, 0), lit: green high, red a bit lower, blue low."""
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    return (g > 170) & (r > 110) & (r < g - 15) & (b < 110)
+
+
+def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, port, tmp_path):
+    app = ReviewApp(reconstructed_clip, port=port)
+    app.start()
+    try:
+        page = viser_page(port, width=1000, height=620)
+        wait_until(lambda: bool(app.sessions), what="the review session")
+        session = next(iter(app.sessions.values()))
+        session.playback.seek(40)  # the serve in flight, over the court
+        session.render()
+        dismiss_toasts(page, wait_s=2.0)
+        canvas = page.locator(WEBGL_CANVAS)
+
+        first = rgb_of(canvas.screenshot())
+        assert floor_mask(first).mean() > 0.15, "the court floor is not visible"
+        ball0 = np.argwhere(ball_mask(first))
+        assert len(ball0) >= 15, "the ball is not visible"
+
+        # press play in the GUI, as a user would
+        page.get_by_role("checkbox", name="play").click()
+        wait_until(lambda: session.playback.playing, timeout_s=10, what="play to reach the server")
+        start = session.playback.frame
+        wait_until(lambda: session.playback.frame >= start + 8, timeout_s=15, what="playback to advance")
+        page.get_by_role("checkbox", name="play").click()
+        wait_until(lambda: not session.playback.playing, timeout_s=10, what="pause")
+
+        def moved() -> bool:
+            dismiss_toasts(page, wait_s=0.3)
+            img = rgb_of(canvas.screenshot())
+            pts = np.argwhere(ball_mask(img))
+            return len(pts) >= 12 and np.linalg.norm(pts.mean(0) - ball0.mean(0)) > 10
+
+        wait_until(moved, timeout_s=20, what="the ball to move on screen")
+        out = os.environ.get("REVIEW_SCREENSHOT")
+        if out:
+            page.set_viewport_size({"width": 1280, "height": 720})
+            page.mouse.move(5, 700)  # no tooltip
+            session.playback.seek(45)
+            session.render()
+            dismiss_toasts(page, wait_s=0.5)
+            time.sleep(3.0)  # the toast fades out, the frame renders
+            png = page.screenshot()
+            cv2.imwrite(out, cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR),
+                        [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    finally:
+        app.stop()
