@@ -23,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from inference.clipio import Clip, read_ball_csv, write_events_csv
+    from inference.clipio import Clip, FormatError, read_ball_csv, write_events_csv
 
     from .detector import EventDetector
 
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 camera = clip.read_camera(gt=gt)
                 break
-            except (FileNotFoundError, OSError):
+            except (FileNotFoundError, OSError, FormatError):
                 continue
     n_frames = info.n_frames or (int(ball.frame[-1]) + 1 if len(ball) else 0)
     det = EventDetector.from_checkpoint(args.weights, sport=info.sport)

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from inference.clipio import Clip, Manifest
+from inference.clipio import Clip, FormatError, Manifest
 from inference.court import load_court
 from inference.events.classes import ClassSet
 from inference.events.features import FeatureConfig, clip_features, make_windows, to_ref_frames, window_labels
@@ -82,7 +82,7 @@ def clips_from_folder(root: str | Path, split: str) -> list[SimClip]:
             try:
                 camera = clip.read_camera(gt=gt)
                 break
-            except (FileNotFoundError, OSError):
+            except (FileNotFoundError, OSError, FormatError):
                 continue
         out.append(SimClip(str(clip.root), float(info.fps), int(info.width), int(info.height), n, ball, events,
                            camera))
