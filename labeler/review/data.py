@@ -69,8 +69,10 @@ class ReviewData:
         n_frames = int(info.n_frames) if info.n_frames is not None else int(traj.frame[-1]) + 1
         video_ok = True
         try:
-            n_frames = clip.n_frames
-        except FormatError as e:
+            with clip.frames(cache_size=1) as src:
+                n_frames = len(src)
+                src[0]  # decodes: a file that is no video fails here
+        except (FormatError, OSError, IndexError, ValueError) as e:
             warnings.warn(f"the video cannot be opened, the review shows no frames: {e}", stacklevel=2)
             video_ok = False
         uv = np.full((max(n_frames, int(traj.frame[-1]) + 1), 2), np.nan)
