@@ -406,7 +406,8 @@ class ClientView:
             f"still balls {sm['inactive_balls']} · court points {sm['court_points']}"
         )
         nav.notice.content = f"_{s.notices[-1]}_" if s.notices else ""
-        marks = [(f, e.split("_")[-1][:5]) for f, e in sorted(s.events.items())]
+        few = len(s.events) <= 6  # labels of dense marks overlap: then only ticks (the events tab lists them)
+        marks = [(f, e.split("_")[-1][:5] if few else "") for f, e in sorted(s.events.items())]
         keys = s.keyframes()
         if len(keys) <= MAX_KEYFRAME_MARKS:
             marks += [(f, "") for f in keys if f not in s.events]

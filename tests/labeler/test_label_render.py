@@ -1,0 +1,99 @@
+"""Overlay geometry, the frame cache (JPEG transport, prefetch) and the model-assistance helpers of the labeler."""
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+import pytest
+from label_helpers import copy_sample
+
+from inference.camera import Camera
+from inference.clipio import Clip, HitEvents
+from labeler.assist import ProgressClip, propose_events
+from labeler.frames import FrameCache
+from labeler.render import clip_segments, court_segments, ring
+from labeler.state import LabelSession
+from labeler.viewer_common import ImagePlane, fit_distance, screen_of_pixel
+
+
+def test_image_plane_round_trip_and_ray_intersection():
+    plane = ImagePlane(1280, 720)
+    px = np.array([[0.0, 0.0], [640.0, 360.0], [1279.5, 719.5]])
+    np.testing.assert_allclose(plane.scene_to_pixel(plane.pixel_to_scene(px)), px)
+    origin = np.array([0.0, 0.0, -2.0])
+    target = plane.pixel_to_scene([[100.25, 600.75]])[0]
+    assert plane.ray_to_pixel(origin, target - origin) == pytest.approx((100.25, 600.75))
+    assert plane.ray_to_pixel(origin, (5.0, 0.0, 1.0)) is None  # misses the image
+    assert plane.ray_to_pixel(origin, (0.0, 0.0, -1.0)) is None  # away from the plane
+
+
+def test_fitted_view_maps_the_image_into_the_canvas():
+    plane = ImagePlane(1280, 720)
+    for w, h in [(1012, 900), (1600, 600)]:
+        d = fit_distance(plane, w / h)
+        corners = screen_of_pixel([[0, 0], [1280, 720]], plane, w, h, d)
+        assert corners.min() >= -1e-6 and corners[1, 0] <= w + 1e-6 and corners[1, 1] <= h + 1e-6
+        assert np.isclose(corners[1, 0] - corners[0, 0], w) or np.isclose(corners[1, 1] - corners[0, 1], h)
+
+
+def test_clip_segments_to_the_image():
+    seg = np.array([[[-10, 50], [110, 50]], [[20, 20], [30, 30]], [[-5, -5], [-1, -1]], [[np.nan, 0], [1, 1]]])
+    out = clip_segments(seg, 100, 80)
+    assert len(out) == 2
+    np.testing.assert_allclose(out[0], [[0, 50], [100, 50]])
+    np.testing.assert_allclose(out[1], seg[1])
+    assert len(ring((5, 5), 3, 12)) == 12
+
+
+def test_court_model_reprojects_onto_the_clicked_points(tmp_path):
+    clip = copy_sample(tmp_path / "c")
+    s = LabelSession(clip, autosave=False)
+    cam = Camera.load(clip / "gt" / "camera.yaml")
+    layers = court_segments(cam, s.court)
+    assert {"paint", "net"} <= set(layers) and all(len(v) for v in layers.values())
+    # the far baseline's end points are among the reprojected segment ends
+    ends = np.concatenate([v.reshape(-1, 2) for v in layers.values()])
+    far_left = cam.project(s.court.points["far_left"][None])[0]
+    assert np.linalg.norm(ends - far_left, axis=1).min() < 1e-6
+    assert all(((v >= -1e-6) & (v <= np.array([1280, 720]) + 1e-6)).all() for v in layers.values())
+
+
+def test_frame_cache_serves_jpegs_of_the_right_frame_and_prefetches(tmp_path):
+    clip = Clip(copy_sample(tmp_path / "c"))
+    cache = FrameCache(clip, capacity=16, ahead=5, behind=2)
+    try:
+        with clip.frames() as src:
+            ref = src.read(7)
+        img = cv2.imdecode(np.frombuffer(cache.get(7), np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+        assert img.shape == ref.shape and np.abs(img.astype(int) - ref).mean() < 4  # JPEG q85
+        cache.prefetch(7, 1)
+        wanted = [*range(8, 13), 6, 5]  # ahead first, then behind
+        deadline = time.monotonic() + 20
+        while not all(cache.cached(i) for i in wanted) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert all(cache.cached(i) for i in wanted) and not cache.cached(14)
+        with pytest.raises(IndexError, match="outside the clip"):
+            cache.get(240)
+    finally:
+        cache.close()
+
+
+def test_progress_clip_reports_every_frame(tmp_path):
+    root = copy_sample(tmp_path / "c")
+    seen = []
+    clip = ProgressClip(root, lambda done, total: seen.append((done, total)))
+    with clip.frames(cache_size=0) as src:
+        n = sum(1 for _ in src.iter(0, 30))
+    assert n == 30 and seen[-1] == (30, 240) and len(seen) == 30
+
+
+def test_proposed_events_or_a_clear_message(tmp_path):
+    s = LabelSession(copy_sample(tmp_path / "c"), autosave=False)
+    try:
+        events = propose_events(s)
+    except RuntimeError as e:
+        assert "no hit-event model available" in str(e)
+        return
+    assert isinstance(events, HitEvents)
+    assert s.set_event_proposals(events) == len(events)
