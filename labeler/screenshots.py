@@ -31,8 +31,8 @@ def _wait(pred, timeout: float = 30.0) -> None:
     raise TimeoutError("timed out waiting for the labeler")
 
 
-def _dismiss(page) -> None:
-    for _ in range(10):
+def _dismiss(page, wait_s: float = 1.0) -> None:
+    for _ in range(max(1, int(wait_s / 0.1))):
         buttons = page.locator(".mantine-Notification-root button")
         if buttons.count():
             for i in range(buttons.count()):
@@ -86,6 +86,7 @@ def take(out_dir: Path, *, detector: bool = False, chromium: str = "/usr/bin/chr
                 if tab:
                     page.get_by_role("tab", name=tab).click()
                 time.sleep(0.8)
+                _dismiss(page, wait_s=0.3)  # the software-WebGL toast can come back after a long run
                 path = out_dir / f"labeler_{name}.png"
                 page.screenshot(path=str(path))
                 written.append(path)
