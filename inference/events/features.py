@@ -7,7 +7,8 @@ clip's frames afterwards.
 Feature columns per (resampled) frame, in this order:
 
 - ``x, y``: ball position, normalised image coordinates shifted to ``[1, 2]``; missing ball = ``0, 0``.
-- ``vx, vy`` (``velocity``): displacement per reference frame ×10 (0 where either end is missing).
+- ``vx, vy`` (``velocity``): displacement per reference frame × ``velocity_scale`` (0 where either end is
+  missing).
 - ``seen`` (``velocity``): 1 where the ball is known.
 - 8 corner values (``corners``): the four ground corners of the court projected by the camera, in
   ``[1, 2]`` (0 when no camera or outside the image).
@@ -33,6 +34,7 @@ class FeatureConfig:
         ref_fps: frame rate the track is resampled to (None: keep the clip's).
         velocity: add ``vx, vy, seen``; corners: add the 4 projected ground corners; poses: add keypoints.
         players: number of players whose keypoints are used (poses).
+        velocity_scale: multiplies the per-frame displacement (normalised units) of ``vx, vy``.
     """
 
     ref_fps: float | None = 50.0
@@ -40,6 +42,7 @@ class FeatureConfig:
     corners: bool = False
     poses: bool = False
     players: int = 4
+    velocity_scale: float = 10.0
 
     def __post_init__(self) -> None:
         if self.ref_fps is not None and self.ref_fps <= 0:
@@ -50,11 +53,12 @@ class FeatureConfig:
         if isinstance(d, FeatureConfig):
             return d
         d = dict(d or {})
-        return cls(**{k: d[k] for k in ("ref_fps", "velocity", "corners", "poses", "players") if k in d})
+        return cls(**{k: d[k] for k in ("ref_fps", "velocity", "corners", "poses", "players", "velocity_scale")
+                     if k in d})
 
     def to_dict(self) -> dict:
         return {"ref_fps": self.ref_fps, "velocity": self.velocity, "corners": self.corners,
-                "poses": self.poses, "players": self.players}
+                "poses": self.poses, "players": self.players, "velocity_scale": self.velocity_scale}
 
     @property
     def n_features(self) -> int:
@@ -115,7 +119,7 @@ def probs_to_clip(probs_ref: np.ndarray, n_frames: int, fps: float, ref_fps: flo
 
 
 # -------------------------------------------------------------------------------------------- features
-def ball_features(xy: np.ndarray, velocity: bool = True) -> np.ndarray:
+def ball_features(xy: np.ndarray, velocity: bool = True, scale: float = 10.0) -> np.ndarray:
     """``(T, 2)`` positions (NaN missing) → ``(T, 2 or 5)`` ball features (see the module docstring)."""
     seen = np.isfinite(xy).all(axis=1)
     pos = np.where(seen[:, None], xy + 1.0, 0.0)
@@ -123,7 +127,7 @@ def ball_features(xy: np.ndarray, velocity: bool = True) -> np.ndarray:
         return pos
     v = np.zeros_like(pos)
     ok = seen[1:] & seen[:-1]
-    v[1:][ok] = (xy[1:] - xy[:-1])[ok] * 10.0
+    v[1:][ok] = (xy[1:] - xy[:-1])[ok] * scale
     return np.concatenate([pos, v, seen[:, None].astype(float)], axis=1)
 
 
@@ -162,7 +166,7 @@ def clip_features(ball: BallTrack, n_frames: int, fps: float, config: FeatureCon
                   court=None, players: PlayerTracks | None = None) -> np.ndarray:
     """``(T', F)`` features of a clip at the reference rate (``F = config.n_features``)."""
     xy = resample_xy(dense_xy(ball, n_frames), fps, config.ref_fps)
-    parts = [ball_features(xy, config.velocity)]
+    parts = [ball_features(xy, config.velocity, config.velocity_scale)]
     if config.corners:
         parts.append(court_corner_features(camera, court, len(xy)))
     if config.poses:

@@ -52,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n-test", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1234, help="the experiment's seed (data seeds 10·seed + 0/1/2)")
     ap.add_argument("--cache-dir", default="data/events_cache")
+    ap.add_argument("--max-test", type=int, help="use only the first N test clips (speed)")
     ap.add_argument("--no-rf", action="store_true")
     ap.add_argument("--out", type=Path, help="also write the tables (markdown) here")
     args = ap.parse_args(argv)
@@ -61,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
                          n_test=args.n_test, seed=args.seed, cache_dir=args.cache_dir,
                          on_unmapped="error" if args.sport == "padel" else "warn")
     val = [c.sim for c in dm.labelled("val")]
-    test = [c.sim for c in dm.labelled("test")]
+    test = [c.sim for c in dm.labelled("test")][: args.max_test or None]
     rng = np.random.default_rng(7)
     e2e_tracks = [perturb(c, rng) for c in test]
     entries = []  # (name, scorer, decode params, ref fps)

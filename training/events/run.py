@@ -56,9 +56,10 @@ def tune(det: EventDetector, dm: EventDataModule, passes: int = 2) -> float:
 
 
 def event_tables(det: EventDetector, dm: EventDataModule, name: str, split: str = "test",
-                 noise_seed: int = 7) -> tuple[dict[str, float], str]:
-    """Event-set metrics on ``split`` with annotated and detector-like ball positions."""
-    clips = [c.sim for c in dm.labelled(split)]
+                 noise_seed: int = 7, max_clips: int | None = None) -> tuple[dict[str, float], str]:
+    """Event-set metrics on ``split`` (its first ``max_clips``) with annotated and detector-like ball
+    positions."""
+    clips = [c.sim for c in dm.labelled(split)][: max_clips or None]
     scorer = detector_scorer(det)
     rng = np.random.default_rng(noise_seed)
     out, tables = {}, []
@@ -136,6 +137,11 @@ def evaluate_events(cfg: DictConfig) -> dict[str, float]:
         torch.set_num_threads(int(cfg.threads))
     dm = hydra.utils.instantiate(cfg.data, _convert_="all")
     det = load_detector(path, cfg, dm)
-    scores, table = event_tables(det, dm, f"{det.kind} ({path.name})", split=cfg.get("split", "test"))
+    scores, table = event_tables(det, dm, f"{det.kind} ({path.name})", split=cfg.get("split", "test"),
+                                 max_clips=cfg.get("max_clips"))
     print("\n" + table)
+    if cfg.get("export_path"):  # e.g. a Lightning checkpoint, calibrated and tuned here, shipped as a model file
+        det.meta["test"] = {k: float(v) for k, v in scores.items()}
+        det.save(cfg.export_path)
+        log.info("exported %s", cfg.export_path)
     return scores
