@@ -250,7 +250,12 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     fit = reconstruct(obs, ctx.cfg.method)
     fit.save(clip)
     ok = sum(s.ok for s in fit.segments)
-    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights", partial=ok < len(fit.segments))
+    if ok == 0:
+        reasons = "; ".join(sorted({s.reason for s in fit.segments if not s.ok}))
+        raise StageError(f"{clip.root}: no flight could be reconstructed ({reasons}) — check ball.csv and events.csv")
+    # flights that cannot be fitted (too few detections between two events) are normal in a real rally: they
+    # are listed in segments.json with their reason, and the run still counts as complete
+    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed")
 
 
 def _file(name: str) -> Callable[[Context], Path]:
