@@ -13,7 +13,7 @@ def main(cfg: DictConfig) -> float | None:
     from training.run import train
 
     metrics = train(cfg)
-    return metrics.get("val/f1")
+    return metrics.get("events/val_f1", metrics.get("val/f1"))  # hit-event runs: F1 after decoder tuning
 
 
 if __name__ == "__main__":

@@ -93,7 +93,7 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
     det = detector_from_module(module, dm, meta={"experiment": OmegaConf.to_container(cfg.get("tags") or []),
                                                  "data": {"source": dm.source, "root": dm.root,
                                                           "counts": dm.counts, "seed": dm.seed}})
-    metrics["events/val_f1"] = tune(det, dm, passes=1 if dev else 2)
+    metrics["events/val_f1"] = det.meta["val_f1"] = tune(det, dm, passes=1 if dev else 2)
     out = Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar"
     if cfg.get("test", True):
         scores, table = event_tables(det, dm, f"HitNet {module.hparams.layers}×{module.hparams.hidden}"
@@ -122,7 +122,7 @@ def load_detector(path: str | Path, cfg: DictConfig, dm: EventDataModule) -> Eve
     module.load_state_dict(state["state_dict"])
     calibrate(module, dm)
     det = detector_from_module(module, dm)
-    tune(det, dm)
+    det.meta["val_f1"] = tune(det, dm)
     return det
 
 
@@ -139,6 +139,8 @@ def evaluate_events(cfg: DictConfig) -> dict[str, float]:
     det = load_detector(path, cfg, dm)
     scores, table = event_tables(det, dm, f"{det.kind} ({path.name})", split=cfg.get("split", "test"),
                                  max_clips=cfg.get("max_clips"))
+    if "val_f1" in det.meta:
+        print(f"\nvalidation event F1 after decoder tuning: {det.meta['val_f1']:.3f}")
     print("\n" + table)
     if cfg.get("export_path"):  # e.g. a Lightning checkpoint, calibrated and tuned here, shipped as a model file
         det.meta["test"] = {k: float(v) for k, v in scores.items()}
