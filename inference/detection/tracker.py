@@ -78,7 +78,7 @@ class TrackState(IntEnum):
 
 _PIXEL_FIELDS = ("meas_std_px", "jerk_std", "birth_speed_std", "birth_accel_std", "max_speed_px_s",
                  "static_radius_px", "mirror_dx_px", "mirror_min_dy_px", "mirror_line_tol_px",
-                 "birth_min_motion_px")
+                 "birth_min_motion_px", "fill_radius_px")
 """Fields of :class:`TrackerConfig` in pixels (or px/s, px/s², px/s³), scaled with the frame height."""
 
 
@@ -121,6 +121,10 @@ class TrackerConfig:
     max_gap_s: float = 0.2               # coast this long through misses, then the track ends
     coast_score_decay: float = 0.5       # coasted score = last detection's score × decay^misses
     drop_trailing_coast: bool = True     # track_candidates: withdraw coasts not closed by a detection
+    # offline passes of track_candidates (0 / False: the online tracker's output only)
+    backward_pass: bool = True           # also track the reversed clip; fill frames only it detected
+    fill_max_gap_s: float = 0.2          # fill a gap between two detections at most this long ...
+    fill_radius_px: float = 20.0         # ... with the clean candidate nearest the interpolated path
     history: int = 64                    # detections kept per track (back-fill, stillness test)
     reference_height: float | None = 720.0  # pixel knobs are for this frame height (None: never scale)
 
@@ -380,6 +384,7 @@ class BallTracker:
         self.memory = StaticMemory(c.static_radius_px, self.static_frames, forget, c.max_static_sites)
         self._next_id = 0
         self._last_detection = -1   # last frame reported DETECTED
+        self.flagged = np.zeros(0, bool)   # last frame's candidates flagged static or reflection
 
     # -------------------------------------------------------------------------------------- update
     def update(self, xy, score, static_xy=None) -> FrameEstimate:
@@ -411,6 +416,7 @@ class BallTracker:
             estimate = self._promote() or estimate
         if estimate.state == TrackState.DETECTED:
             self._last_detection = self.frame
+        self.flagged = static | reflection
         self.frame += 1
         return estimate
 
@@ -585,6 +591,11 @@ class TrackResult:
         """``(T,) bool``: a position is reported."""
         return self.state != TrackState.NONE
 
+    def reversed(self) -> TrackResult:
+        """The result with its frames in reverse order (a copy)."""
+        return TrackResult(self.state[::-1].copy(), self.xy[::-1].copy(), self.score[::-1].copy(),
+                           self.track_id[::-1].copy())
+
     def set(self, frame: int, state: TrackState, xy, score: float, track_id: int) -> None:
         """Write one frame's report."""
         self.state[frame], self.xy[frame] = state, xy
@@ -604,7 +615,13 @@ class TrackResult:
 def track_candidates(candidates: Sequence[FrameCandidates], fps: float,
                      config: TrackerConfig = TrackerConfig(), image_size: tuple[int, int] | None = None,
                      static_xy: Sequence[np.ndarray | None] | None = None) -> TrackResult:
-    """Run :class:`BallTracker` over a clip's candidates (original-frame pixels), with back-filling.
+    """Run :class:`BallTracker` over a clip's candidates (original-frame pixels), with the offline passes.
+
+    1. The online tracker, forwards, with back-filling of each new track's tentative frames.
+    2. ``backward_pass``: the same tracker over the reversed clip; frames that only it detected (mostly
+       the frames before a forward birth, and after a forward track ended) are taken from it.
+    3. ``fill_max_gap_s``: :func:`fill_gaps` between detections with clean candidates near the path.
+    4. ``drop_trailing_coast``: :func:`drop_unclosed_coasts`.
 
     Args:
         candidates: ``T`` :class:`FrameCandidates` (or ``(xy, score[, area])`` tuples).
@@ -612,16 +629,79 @@ def track_candidates(candidates: Sequence[FrameCandidates], fps: float,
         static_xy: optional ``T`` arrays ``(M, 2)`` of known still balls per frame
             (:func:`inactive_positions`).
     """
+    cands = [FrameCandidates.from_arrays(c[0], c[1]) for c in candidates]
+    static_xy = [None] * len(cands) if static_xy is None else list(static_xy)
+    out, flagged, cfg = _one_pass(cands, fps, config, image_size, static_xy)
+    if cfg.backward_pass and len(cands):
+        back, back_flagged, _ = _one_pass(cands[::-1], fps, config, image_size, static_xy[::-1])
+        merge_backward(out, back.reversed(), cands, flagged)
+        flagged = [f | b for f, b in zip(flagged, back_flagged[::-1])]
+    if cfg.fill_max_gap_s > 0:
+        fill_gaps(out, cands, flagged, cfg.frames(cfg.fill_max_gap_s, fps), cfg.fill_radius_px)
+    if cfg.drop_trailing_coast:
+        drop_unclosed_coasts(out)
+    return out
+
+
+def _one_pass(cands: list[FrameCandidates], fps: float, config: TrackerConfig,
+              image_size: tuple[int, int] | None, static_xy: list
+              ) -> tuple[TrackResult, list[np.ndarray], TrackerConfig]:
+    """The online tracker over ``cands`` with back-filling; also each frame's ``(K,) bool`` flagged
+    (static or reflection) candidates, and the (image-scaled) config."""
     tracker = BallTracker(fps, config, image_size)
-    out = TrackResult.empty(len(candidates))
-    for t, cand in enumerate(candidates):
-        est = tracker.update(cand[0], cand[1], None if static_xy is None else static_xy[t])
+    out = TrackResult.empty(len(cands))
+    flagged = []
+    for t, cand in enumerate(cands):
+        est = tracker.update(cand.xy, cand.score, static_xy[t])
+        flagged.append(tracker.flagged)
         out.set(t, est.state, est.xy, est.score, est.track_id)
         for f, xy, score in est.backfill:
             out.set(f, TrackState.DETECTED, xy, score, est.track_id)
-    if tracker.cfg.drop_trailing_coast:
-        drop_unclosed_coasts(out)
-    return out
+    return out, flagged, tracker.cfg
+
+
+def merge_backward(result: TrackResult, backward: TrackResult, candidates: Sequence[FrameCandidates] = (),
+                   flagged: Sequence[np.ndarray] = ()) -> None:
+    """In place: frames ``result`` did not detect but ``backward`` (a pass over the reversed clip, put
+    back in order) did take its detection, unless ``result``'s pass ``flagged`` that candidate (static
+    or a reflection: e.g. a backward birth on the brighter mirror image at the end of a flight); its
+    track ids are shifted past ``result``'s.
+
+    ``candidates`` / ``flagged``: per frame, the candidates and ``(K,) bool`` flags of ``result``'s pass
+    (empty: no veto).
+    """
+    take = (result.state != TrackState.DETECTED) & (backward.state == TrackState.DETECTED)
+    for t in np.flatnonzero(take) if len(flagged) else ():
+        hit = np.all(candidates[t].xy == backward.xy[t], axis=1) & np.asarray(flagged[t], bool)
+        take[t] = not hit.any()
+    shift = int(result.track_id.max(initial=-1)) + 1
+    result.state[take], result.xy[take] = TrackState.DETECTED, backward.xy[take]
+    result.score[take], result.track_id[take] = backward.score[take], backward.track_id[take] + shift
+
+
+def fill_gaps(result: TrackResult, candidates: Sequence[FrameCandidates], flagged: Sequence[np.ndarray],
+              max_gap: int, radius: float) -> None:
+    """In place: in each run of at most ``max_gap`` frames without a detection between two detections,
+    take in every frame the unflagged candidate nearest the straight path between the two detections,
+    if it is within ``radius`` px of it (a ball missed by the tracker's gate, e.g. after a bounce).
+
+    ``flagged``: per frame ``(K,) bool``, candidates that are static or reflections.
+    """
+    det = np.flatnonzero(result.state == TrackState.DETECTED)
+    for a, b in zip(det[:-1], det[1:]):
+        if not 1 < b - a <= max_gap + 1:
+            continue
+        for t in range(a + 1, b):
+            cand = candidates[t]
+            ok = ~np.asarray(flagged[t], bool) if len(flagged[t]) == cand.count else np.ones(cand.count, bool)
+            if not ok.any():
+                continue
+            w = (t - a) / (b - a)
+            path = (1.0 - w) * result.xy[a] + w * result.xy[b]
+            d = np.where(ok, np.linalg.norm(cand.xy - path, axis=1), np.inf)
+            j = int(np.argmin(d))
+            if d[j] <= radius:
+                result.set(t, TrackState.DETECTED, cand.xy[j], float(cand.score[j]), int(result.track_id[a]))
 
 
 def drop_unclosed_coasts(result: TrackResult) -> None:
