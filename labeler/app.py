@@ -350,16 +350,19 @@ class ClientView:
     def _render_loop(self) -> None:
         while True:
             with self._cond:
-                while not self._closed and self.target == self.shown and not (self._overlay_dirty or self._gui_dirty):
+                if not self._closed and self.target == self.shown and not (self._overlay_dirty or self._gui_dirty):
                     self._cond.wait(timeout=1.0)
-                    if self.target == self.shown and not self._closed:
-                        self._sync_from_disk()
                 if self._closed:
                     return
-                frame, direction = self.target, self.direction
-                self._overlay_dirty = self._gui_dirty = False
-                requested = self._requested_at.pop(frame, None)
-                self._requested_at.clear()
+                idle = self.target == self.shown and not (self._overlay_dirty or self._gui_dirty)
+                if not idle:
+                    frame, direction = self.target, self.direction
+                    self._overlay_dirty = self._gui_dirty = False
+                    requested = self._requested_at.pop(frame, None)
+                    self._requested_at.clear()
+            if idle:  # outside the condition: syncing takes the session lock (lock order: session, then cond)
+                self._sync_from_disk()
+                continue
             try:
                 self._render(frame, direction)
             except Exception as e:  # a failing frame is reported, the labeler goes on
