@@ -116,13 +116,14 @@ class TrackerConfig:
     # life cycle
     confirm_frames: int = 3              # detections before a tentative track may become the ball track
     birth_min_motion_px: float = 3.0     # ... and how far it must have moved
-    tentative_max_misses: int = 1
+    tentative_max_misses: int = 2        # val-tuned (bench/tune_tracker.py)
     max_tentatives: int = 8
     max_gap_s: float = 0.2               # coast this long through misses, then the track ends
     coast_score_decay: float = 0.5       # coasted score = last detection's score × decay^misses
     drop_trailing_coast: bool = True     # track_candidates: withdraw coasts not closed by a detection
     # offline passes of track_candidates (0 / False: the online tracker's output only)
-    backward_pass: bool = True           # also track the reversed clip; fill frames only it detected
+    backward_pass: bool = True           # also track the reversed clip; fill frames only it detected,
+    backward_tail_gap_s: float = 0.14    # ... but not a track's first detections cut off by a longer gap
     fill_max_gap_s: float = 0.2          # fill a gap between two detections at most this long ...
     fill_radius_px: float = 20.0         # ... with the clean candidate nearest the interpolated path
     history: int = 64                    # detections kept per track (back-fill, stillness test)
@@ -634,7 +635,9 @@ def track_candidates(candidates: Sequence[FrameCandidates], fps: float,
     out, flagged, cfg = _one_pass(cands, fps, config, image_size, static_xy)
     if cfg.backward_pass and len(cands):
         back, back_flagged, _ = _one_pass(cands[::-1], fps, config, image_size, static_xy[::-1])
-        merge_backward(out, back.reversed(), cands, flagged)
+        back = back.reversed()
+        peel_tails(back, cfg.frames(cfg.backward_tail_gap_s, fps))
+        merge_backward(out, back, cands, flagged)
         flagged = [f | b for f, b in zip(flagged, back_flagged[::-1])]
     if cfg.fill_max_gap_s > 0:
         fill_gaps(out, cands, flagged, cfg.frames(cfg.fill_max_gap_s, fps), cfg.fill_radius_px)
@@ -658,6 +661,19 @@ def _one_pass(cands: list[FrameCandidates], fps: float, config: TrackerConfig,
         for f, xy, score in est.backfill:
             out.set(f, TrackState.DETECTED, xy, score, est.track_id)
     return out, flagged, tracker.cfg
+
+
+def peel_tails(result: TrackResult, max_gap: int) -> None:
+    """In place: drop each track's first detections while more than ``max_gap`` frames separate them
+    from its next one (a dying backward track that grabbed clutter before giving up)."""
+    for tid in np.unique(result.track_id[result.state == TrackState.DETECTED]):
+        frames = np.flatnonzero((result.track_id == tid) & (result.state == TrackState.DETECTED))
+        gaps = np.diff(frames)
+        n = 0
+        while n < len(gaps) and gaps[n] > max_gap:
+            n += 1
+        drop = frames[:n]
+        result.state[drop], result.xy[drop], result.score[drop], result.track_id[drop] = 0, np.nan, 0.0, -1
 
 
 def merge_backward(result: TrackResult, backward: TrackResult, candidates: Sequence[FrameCandidates] = (),

@@ -1,7 +1,7 @@
 """The offline passes of ``track_candidates``: backward pass, gap filling, and what they must not take.
 
 Constructed candidate sequences (1280×720, 30 fps, original pixels): a ball in a parabola whose start the
-detector sees only every third frame (too sparse for a forward birth), a still ball lying on court, a
+detector sees only every fourth frame (too sparse for a forward birth), a still ball lying on court, a
 brighter mirror image of the ball below a floor line, clutter.
 """
 from __future__ import annotations
@@ -41,9 +41,9 @@ def frames_with(path: np.ndarray, seen: np.ndarray, rng, still: bool = True, clu
 
 
 def sparse_start(n: int = 60, sparse: int = 15) -> np.ndarray:
-    """Seen every third frame for the first ``sparse`` frames, then every frame."""
+    """Seen every fourth frame for the first ``sparse`` frames, then every frame."""
     seen = np.ones(n, bool)
-    seen[:sparse] = np.arange(sparse) % 3 == 0
+    seen[:sparse] = np.arange(sparse) % 4 == 0
     return seen
 
 
@@ -57,7 +57,7 @@ def test_backward_pass_recovers_a_weak_start_before_the_birth():
     rng = np.random.default_rng(0)
     path, seen = parabola(60), sparse_start()
     cands = frames_with(path, seen, rng, clutter=0.1)
-    early = np.flatnonzero(seen[:15])                                   # frames 0, 3, 6, 9, 12
+    early = np.flatnonzero(seen[:15])                                   # frames 0, 4, 8, 12
     forward = track_candidates(cands, FPS, TrackerConfig(backward_pass=False), image_size=(W, H))
     both = track_candidates(cands, FPS, image_size=(W, H))
     assert hits(forward, path, early) <= 1                              # too sparse for a forward birth
@@ -71,7 +71,7 @@ def test_reversed_clip_gives_the_mirror_result():
     rng = np.random.default_rng(1)
     path, seen = parabola(60), sparse_start()[::-1]
     cands = frames_with(path, seen, rng)
-    late = np.flatnonzero(seen[-15:]) + 45                             # seen every third frame
+    late = np.flatnonzero(seen[-15:]) + 45                             # seen every fourth frame
     both = track_candidates(cands, FPS, image_size=(W, H))
     assert hits(both, path, late) == len(late)
 
