@@ -47,6 +47,13 @@ by :func:`track_candidates`). A track without a detection **coasts** on its pred
 birth rule. Offline, :func:`track_candidates` withdraws coasts that no detection of the same track
 closes (the ball left or was lost, so those estimates were guesses).
 
+**Offline passes** (:func:`track_candidates`). The same tracker also runs over the reversed clip; frames
+only that backward pass detected are added (the frames before a forward birth, after a forward death),
+unless the forward pass had flagged that candidate static or a reflection, and without a dying backward
+track's first detections cut off by a gap longer than ``backward_tail_gap_s``. Then :func:`fill_gaps`
+takes, between two detections at most ``fill_max_gap_s`` apart, the clean candidate nearest the straight
+path between them (within ``fill_radius_px``). Tuned on the val split by ``bench/tune_tracker.py``.
+
 Pixel parameters are for a 720-row frame and scale with the frame height when ``image_size`` is given.
 
 Example (``candidates``: one :class:`~.postprocess.FrameCandidates` per frame, original pixels)::
