@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from inference.clipio import Clip
+from inference.clipio import BallTrack, Clip
 from inference.court import Court
 
 from .state import STATE_DIR, RunState
@@ -178,9 +178,16 @@ def _smooth_run(ctx: Context) -> Outcome:
 
     raw = read_ball_csv(ctx.detected_path)
     info = ctx.clip.info
-    res = smooth_track(raw, info.width, info.height, info.fps)
+    # the tracker's coasts (visibility 3) are its own predictions, wrong across every bounce and hit: only
+    # detections are measurements
+    coasted = raw.visibility == 3
+    xy = raw.xy.copy()
+    xy[coasted] = np.nan
+    measured = BallTrack(raw.frame, np.where(coasted, 0, raw.visibility), xy)
+    res = smooth_track(measured, info.width, info.height, info.fps)
     ctx.clip.write_ball(res.track)
-    return Outcome(len(raw), f"{len(res.pieces)} pieces, {len(res.outliers)} outliers dropped")
+    return Outcome(len(raw), f"{len(res.pieces)} pieces, {int(coasted.sum())} coasted frames and "
+                   f"{len(res.outliers)} outliers dropped")
 
 
 # ------------------------------------------------------------------------------------------- events
@@ -272,7 +279,7 @@ def build_stages() -> list[Stage]:
         Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx)},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
               lambda ctx: [ctx.detected_path], _detect_run),
-        Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v1"},
+        Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
                                      "weights": ctx.cfg.events},

