@@ -88,12 +88,25 @@ def test_progress_clip_reports_every_frame(tmp_path):
     assert n == 30 and seen[-1] == (30, 240) and len(seen) == 30
 
 
-def test_proposed_events_or_a_clear_message(tmp_path):
-    s = LabelSession(copy_sample(tmp_path / "c"), autosave=False)
-    try:
-        events = propose_events(s)
-    except RuntimeError as e:
-        assert "no hit-event model available" in str(e)
-        return
+def test_proposed_events_match_the_annotated_rally(tmp_path):
+    """The shipped hit-event model proposes the sample's events from its labelled ball track."""
+    from inference.events.metrics import match_events
+
+    root = copy_sample(tmp_path / "c")
+    s = LabelSession(root, autosave=False)
+    events = propose_events(s)
     assert isinstance(events, HitEvents)
+    gt = Clip(root).read_events(gt=True)
+    hits = [e.startswith("player") for e in events.event]
+    gt_hits = [e.startswith("player") for e in gt.event]
+    assert match_events(gt.frame[gt_hits], events.frame[hits], tol=1) >= 0.8 * sum(gt_hits)
     assert s.set_event_proposals(events) == len(events)
+
+
+def test_no_event_model_gives_a_clear_message(tmp_path, monkeypatch):
+    import inference.events.detector as det
+
+    monkeypatch.setattr(det, "default_weights", lambda sport: tmp_path / "missing.pth.tar")
+    s = LabelSession(copy_sample(tmp_path / "c"), autosave=False)
+    with pytest.raises(RuntimeError, match="no hit-event model available"):
+        propose_events(s)
