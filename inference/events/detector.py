@@ -6,9 +6,11 @@ Example:
     >>> write_events_csv(clip.events_path, result.events)
 
 A model file (``*.pth.tar``, loaded with ``weights_only=True``) is a dict:
-``format = "rally3d-events"``, ``kind`` (``hitnet`` | ``physics``), ``class_set`` (dict), ``features``
+``format = "rally3d-events"``, ``kind`` (``hitnet`` | ``physics`` | ``crop``), ``class_set`` (dict), ``features``
 (dict), ``window``, ``last_k``, ``net`` (HitNet hyper-parameters), ``state_dict``, ``decode`` (the tuned
 decoder) and ``physics`` (parameters of the physics detector), plus ``meta`` (training data, metrics).
+A ``crop`` model (:mod:`.crop`) also stores ``crop`` (its :class:`~.crop.CropConfig`) and needs the clip's
+frames: ``predict(..., frames=clip.frames())``.
 """
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ log = logging.getLogger(__name__)
 FORMAT = "rally3d-events"
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 DEFAULT_WEIGHTS = {"padel": "hitnet_padel.pth.tar", "tennis": "hitnet_tennis.pth.tar"}
-KINDS = ("hitnet", "physics")
+KINDS = ("hitnet", "physics", "crop")
 
 
 @dataclass
@@ -102,11 +104,11 @@ class EventDetector:
 
     def __init__(self, kind: str, class_set: ClassSet, features: FeatureConfig, decode_params: DecodeParams, *,
                  net: HitNet | None = None, window: int = 12, last_k: int = 6,
-                 physics: PhysicsParams | None = None, meta: dict | None = None):
+                 physics: PhysicsParams | None = None, meta: dict | None = None, crop=None):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-        if kind == "hitnet" and net is None:
-            raise ValueError("a hitnet detector needs its network")
+        if kind in ("hitnet", "crop") and net is None:
+            raise ValueError(f"a {kind} detector needs its network")
         if not 1 <= last_k <= window:
             raise ValueError(f"need 1 <= last_k <= window, got last_k={last_k}, window={window}")
         self.kind, self.class_set, self.features, self.decode_params = kind, class_set, features, decode_params
@@ -114,6 +116,7 @@ class EventDetector:
         self.window, self.last_k = int(window), int(last_k)
         self.physics = physics or PhysicsParams()
         self.meta = meta or {}
+        self.crop = crop  # CropConfig of a crop model
         self.court = load_court(class_set.sport) if class_set.sport else None
 
     # ------------------------------------------------------------------------------------ loading
@@ -131,16 +134,23 @@ class EventDetector:
         if blob["kind"] == "hitnet":
             net = HitNet(**blob["net"])
             net.load_state_dict(blob["state_dict"])
+        crop = None
+        if blob["kind"] == "crop":
+            from .crop import CropConfig, CropHitNet
+
+            net, crop = CropHitNet(**blob["net"]), CropConfig.from_dict(blob.get("crop"))
+            net.load_state_dict(blob["state_dict"])
         return cls(blob["kind"], class_set, features, DecodeParams.from_dict(blob["decode"]), net=net,
                    window=int(blob.get("window", 12)), last_k=int(blob.get("last_k", 6)),
-                   physics=PhysicsParams(**blob.get("physics", {})), meta=dict(blob.get("meta", {})))
+                   physics=PhysicsParams(**blob.get("physics", {})), meta=dict(blob.get("meta", {})), crop=crop)
 
     def to_blob(self) -> dict[str, Any]:
         return {"format": FORMAT, "kind": self.kind, "class_set": self.class_set.to_dict(),
                 "features": self.features.to_dict(), "window": self.window, "last_k": self.last_k,
                 "net": dict(self.net.hparams) if self.net is not None else {},
                 "state_dict": self.net.state_dict() if self.net is not None else {},
-                "decode": self.decode_params.to_dict(), "physics": self.physics.to_dict(), "meta": self.meta}
+                "decode": self.decode_params.to_dict(), "physics": self.physics.to_dict(), "meta": self.meta,
+                **({"crop": self.crop.to_dict()} if self.crop is not None else {})}
 
     def save(self, path: str | Path) -> Path:
         """Write the model file atomically."""
@@ -158,12 +168,22 @@ class EventDetector:
         return self.features.ref_fps
 
     def ref_probs(self, ball: BallTrack, n_frames: int, fps: float, *, camera=None,
-                  players: PlayerTracks | None = None) -> np.ndarray:
-        """``(T', C)`` per-frame class probabilities at the reference rate."""
+                  players: PlayerTracks | None = None, frames=None) -> np.ndarray:
+        """``(T', C)`` per-frame class probabilities at the reference rate (``frames``: crop models)."""
         if self.kind == "physics":
             xy = resample_xy(dense_xy(ball, n_frames), fps, self.ref_fps)
             return physics_probs(xy, self.class_set, self.physics, camera=camera, court=self.court)
         feats = clip_features(ball, n_frames, fps, self.features, camera=camera, court=self.court, players=players)
+        if self.kind == "crop":
+            from .crop import extract_crops
+
+            if frames is None:
+                raise ValueError("this hit-event model is a crop model: it needs the clip's frames — pass "
+                                 "frames=clip.frames() to predict(), or use a ball-only model (hitnet_<sport>)")
+            xy = resample_xy(dense_xy(ball, n_frames), fps, self.ref_fps)
+            crops = extract_crops(frames, xy, fps, self.ref_fps, self.crop, n_frames)
+            return window_probs_to_frames(self.net.clip_probs(feats, crops, self.window), len(feats), self.window,
+                                          self.last_k)
         wins = torch.from_numpy(make_windows(feats, self.window))
         win_probs = self.net.probs(wins).numpy().astype(np.float64)
         return window_probs_to_frames(win_probs, len(feats), self.window, self.last_k)
@@ -177,13 +197,16 @@ class EventDetector:
             fps: the clip's frame rate; width, height: its image size (pixels).
             camera: resolves grouped classes to their surface (else their default label).
             players: pose tracks (used by models trained with poses).
-            frames: a ``FrameSource`` (unused by the ball-only models).
+            frames: a ``FrameSource`` (needed by crop models, unused by the ball-only ones).
             n_frames: frames in the clip (default: the frame source's length or the track's last frame + 1).
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
             raise ValueError(f"fps must be a positive number, got {fps}")
         if width <= 0 or height <= 0:
             raise ValueError(f"width and height must be positive, got {width}x{height}")
+        if self.kind == "crop" and frames is None:
+            raise ValueError("this hit-event model is a crop model: it needs the clip's frames — pass "
+                             "frames=clip.frames() to predict(), or use a ball-only model (hitnet_<sport>)")
         if n_frames is None:
             n_frames = len(frames) if frames is not None and hasattr(frames, "__len__") else (
                 int(ball.frame[-1]) + 1 if len(ball) else 0)
@@ -193,7 +216,7 @@ class EventDetector:
             probs = np.zeros((n_frames, C))
             probs[:, 0] = 1.0
             return EventResult(HitEvents.empty(), probs, self.class_set.classes)
-        p_ref = self.ref_probs(ball, n_frames, fps, camera=camera, players=players)
+        p_ref = self.ref_probs(ball, n_frames, fps, camera=camera, players=players, frames=frames)
         f_ref, cls = decode(p_ref, self.ref_fps or fps, self.class_set, self.decode_params)
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
