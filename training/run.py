@@ -33,6 +33,10 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
 
 def train(cfg: DictConfig) -> dict[str, float]:
     """Fit (optionally resuming from ``ckpt_path``), then test the best checkpoint; returns the metrics."""
+    if cfg.get("task") == "events" and str(cfg.model.get("_target_", "")).endswith("CropHitNetModule"):
+        from training.events.crop_run import train_crop_events  # hitnet_crop_* experiments
+
+        return train_crop_events(cfg)
     if cfg.get("task") == "events":  # hit-event models (conf/experiment/hitnet_*.yaml)
         from training.events.run import train_events
 
@@ -56,6 +60,10 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     frame pixels (WASB-SBDT) and τ = 10 px at 1280×720 (the thesis), for our tracker and WASB's
     max-score tracker, with frames/s; returns the F1s. Hit-event models (``task: events``) print their
     event-set tables instead (training/events/run.py)."""
+    if cfg.get("task") == "events" and str(cfg.model.get("_target_", "")).endswith("CropHitNetModule"):
+        from training.events.crop_run import evaluate_crop_events
+
+        return evaluate_crop_events(cfg)
     if cfg.get("task") == "events":
         from training.events.run import evaluate_events
 
