@@ -23,6 +23,7 @@ from inference.court import load_court
 from inference.events.classes import ClassSet
 from inference.events.features import FeatureConfig, clip_features, make_windows, to_ref_frames, window_labels
 
+from .degrade import DegradeConfig, degrade_all
 from .simulate import SimClip, simulate_clips
 
 log = logging.getLogger(__name__)
@@ -59,6 +60,16 @@ def label_clips(clips: list[SimClip], class_set: ClassSet, features: FeatureConf
     for c in clips:
         feats = clip_features(c.ball, c.n_frames, c.fps, features, camera=c.camera, court=court)
         out.append(LabelledClip(c, feats, ref_labels(c, class_set, features, len(feats), on_unmapped)))
+    return out
+
+
+def with_tracks(clips: list[LabelledClip], tracks, features: FeatureConfig, court=None) -> list[LabelledClip]:
+    """The same clips and labels with other ball tracks (e.g. degraded ones): features recomputed."""
+    out = []
+    for lc, track in zip(clips, tracks):
+        s = lc.sim
+        feats = clip_features(track, s.n_frames, s.fps, features, camera=s.camera, court=court)
+        out.append(LabelledClip(s, feats, lc.y))
     return out
 
 
@@ -224,13 +235,17 @@ class EventDataModule(L.LightningDataModule):
         n_train, n_val, n_test, seed: synthetic clip counts; seeds ``seed``, ``seed + 1``, ``seed + 2``.
         on_unmapped: ``error`` or ``warn`` for labels the class set does not cover.
         neg_ratio: negatives per positive per epoch. cache_dir: simulated clips are cached here.
+        degrade: :class:`~training.events.degrade.DegradeConfig` fields: train on detector-like tracks
+            (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
+            None or ``enabled: false`` keeps the annotated tracks.
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
                  window: int = 12, last_k: int = 6, source: str = "synthetic", root: str | None = None,
                  n_train: int = 600, n_val: int = 100, n_test: int = 200, seed: int = 0,
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
-                 num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None):
+                 num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
+                 degrade: dict | None = None):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -245,6 +260,8 @@ class EventDataModule(L.LightningDataModule):
         self.seed, self.on_unmapped, self.neg_ratio = seed, on_unmapped, neg_ratio
         self.batch_size, self.num_workers, self.cache_dir = batch_size, num_workers, cache_dir
         self.augment = AugmentConfig(**(augment or {}))
+        self.degrade = DegradeConfig.from_dict(degrade)
+        self._draw = 0  # degradation draws of the training split so far
         self.clips: dict[str, list[LabelledClip]] = {}
         self.sets: dict[str, WindowSet] = {}
 
@@ -268,13 +285,41 @@ class EventDataModule(L.LightningDataModule):
                             "from it", split, self.class_set.name)
         return self.clips[split]
 
+    def degraded(self, split: str, draw: int = 0) -> list[LabelledClip]:
+        """The clips of ``split`` with degraded tracks (draw ``draw``: a fixed seed per split and draw)."""
+        clips = self.labelled(split)
+        offset = {"train": 0, "val": 1, "test": 2}[split]
+        seed = (self.seed * 10 + offset) * 1000 + draw
+        court = load_court(self.class_set.sport) if self.class_set.sport else None
+        return with_tracks(clips, degrade_all([c.sim for c in clips], seed, self.degrade), self.features, court)
+
+    def tuning_clips(self) -> tuple[list[SimClip], list]:
+        """Validation clips and their tracks for temperature and decoder tuning: the annotated tracks, plus
+        ``val_copies`` degraded copies when degradation is on."""
+        val = self.labelled("val")
+        sims, tracks = [c.sim for c in val], [c.sim.ball for c in val]
+        if self.degrade.enabled:
+            for k in range(int(self.degrade.val_copies)):
+                sims += [c.sim for c in val]
+                tracks += degrade_all([c.sim for c in val], (self.seed * 10 + 1) * 1000 + k, self.degrade)
+        return sims, tracks
+
     def setup(self, stage: str | None = None) -> None:
         splits = ("train", "val") if stage in (None, "fit", "validate") else ("test",)
         for split in splits:
-            if split not in self.sets:
-                self.sets[split] = WindowSet(self.labelled(split), self.window, self.last_k)
+            if split in self.sets:
+                continue
+            clips = self.labelled(split)
+            if self.degrade.enabled and split == "train":
+                clips = self.degraded("train", 0)
+            elif self.degrade.enabled and split == "val":
+                clips = clips + [c for k in range(int(self.degrade.val_copies)) for c in self.degraded("val", k)]
+            self.sets[split] = WindowSet(clips, self.window, self.last_k)
 
     def train_dataloader(self):
+        if self.degrade.enabled and self.degrade.every_epoch and self._draw > 0:
+            self.sets["train"] = WindowSet(self.degraded("train", self._draw), self.window, self.last_k)
+        self._draw += 1
         ds = self.sets["train"]
         if int((ds.y > 0).sum()) == 0:
             raise ValueError("the training split has no events: nothing to learn (check events.csv and the "

@@ -22,6 +22,7 @@ from inference.events.detector import EventDetector, load_model_file
 from inference.events.metrics import format_event_table
 
 from .data import EventDataModule, WindowSet
+from .degrade import DegradeConfig, degrade_all
 from .evaluate import counts_for, detector_scorer, fit_temperature, score_all, tune_decoder
 from .simulate import perturb
 
@@ -48,28 +49,33 @@ def calibrate(module, dm: EventDataModule, max_windows: int = 200_000) -> float:
 
 
 def tune(det: EventDetector, dm: EventDataModule, passes: int = 2) -> float:
-    """Tune the detector's decoder on the validation clips; returns the validation event F1."""
-    val = [c.sim for c in dm.labelled("val")]
-    probs = score_all(detector_scorer(det), val, desc="val scores")
+    """Tune the detector's decoder on the validation clips (annotated, plus degraded copies when the data
+    module degrades tracks); returns the validation event F1."""
+    val, tracks = dm.tuning_clips()
+    probs = score_all(detector_scorer(det), val, tracks, desc="val scores")
     det.decode_params, f1 = tune_decoder(probs, val, dm.class_set, det.ref_fps, det.decode_params, passes=passes)
     return f1
 
 
 def event_tables(det: EventDetector, dm: EventDataModule, name: str, split: str = "test",
                  noise_seed: int = 7, max_clips: int | None = None) -> tuple[dict[str, float], str]:
-    """Event-set metrics on ``split`` (its first ``max_clips``) with annotated and detector-like ball
-    positions."""
+    """Event-set metrics on ``split`` (its first ``max_clips``) with annotated, detector-like
+    (:func:`perturb`) and pipeline-like (:func:`~training.events.degrade.degrade`, every clip degraded)
+    ball positions."""
     clips = [c.sim for c in dm.labelled(split)][: max_clips or None]
     scorer = detector_scorer(det)
     rng = np.random.default_rng(noise_seed)
+    degraded = degrade_all(clips, noise_seed, DegradeConfig(p_clean=0.0))
     out, tables = {}, []
-    for mode, tracks in (("gt", [c.ball for c in clips]), ("e2e", [perturb(c, rng) for c in clips])):
+    what = {"gt": "annotated ball", "e2e": "detector-like ball (misses, jitter, false positives)",
+            "deg": "pipeline-like ball (training.events.degrade, every clip degraded)"}
+    for mode, tracks in (("gt", [c.ball for c in clips]), ("e2e", [perturb(c, rng) for c in clips]),
+                         ("deg", degraded)):
         probs = score_all(scorer, clips, tracks, desc=f"{split} {mode}")
         counts = counts_for(probs, clips, dm.class_set, det.ref_fps, det.decode_params)
         s = counts.scores()
         out.update({f"events/{mode}_{k}": v for k, v in s.items() if k in ("recall", "acc", "prec", "f1")})
-        what = "annotated ball" if mode == "gt" else "detector-like ball (misses, jitter, false positives)"
-        tables.append(format_event_table([(name, counts)], title=f"{split}, {len(clips)} clips, {what}, "
+        tables.append(format_event_table([(name, counts)], title=f"{split}, {len(clips)} clips, {what[mode]}, "
                                          "tolerance ±2 frames at 50 fps (±1 at 25/30, ±2 at 60)"))
     return out, "\n\n".join(tables)
 
@@ -81,6 +87,9 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))  # small GRUs: one thread is fastest on a shared CPU
     dm, module, trainer = build(cfg)
+    if cfg.get("init_weights"):  # fine-tune from an exported model file of the same architecture
+        module.net.load_state_dict(load_model_file(cfg.init_weights)["state_dict"])
+        log.info("initialised from %s", cfg.init_weights)
     metrics: dict[str, float] = {}
     dev = bool(cfg.trainer.get("fast_dev_run"))
     trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))

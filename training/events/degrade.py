@@ -1,0 +1,240 @@
+"""A ball-detector degradation model: make an annotated (or simulated) 2D ball track look like what the
+real pipeline writes to ``ball.csv`` (``rally3d infer``: WASB heatmaps → tracker → coasts dropped → RTS
+smoother cut at change points), so the hit-event models can be trained and tuned on such tracks.
+
+What a real detector track looks like (measured on the embedded sample and the rendered ``synth_padel``
+clips): recall ~0.5–0.65, with the ball missed for 5–15 frames (at 30 fps) around the near player's hits
+where the body hides it and in runs of 3–10 frames elsewhere; precision ~0.85–0.9, the wrong positions
+15–150 px off (stuck on a reflection, lagging behind, a blob beside the ball); 1–3 px jitter. The
+tracker's coasts are dropped by the pipeline, so every miss is a gap (no row / visibility 0), and the
+smoother then drops isolated outliers and smooths each piece. :func:`degrade` applies, in this order:
+
+1. jitter: Gaussian, σ drawn per clip in ``jitter_px`` (pixels of the clip's frame);
+2. occlusion gaps around hits: each ``player_near`` hit is hidden with probability ``p_occlude_near`` for
+   ``occlude_s`` seconds (the hit at a random place inside the gap), ``player_far`` hits with
+   ``p_occlude_far`` for half as long;
+3. random runs of misses of ``miss_run_s`` seconds until ``miss_frac`` of the visible frames are missed
+   by them (on top of the occlusions);
+4. wrong positions on ``outlier_frac`` of the remaining detections, in runs of ``outlier_run`` frames,
+   each run ``outlier_px`` pixels off: a fixed offset (a blob beside the ball), stuck (a reflection: one
+   position for the whole run) or lagging (the position of 2–6 frames earlier, pushed off);
+5. the pipeline's smoother (:func:`inference.detection.smooth.smooth_track`) with probability ``p_smooth``.
+
+A clip is left as annotated with probability ``p_clean`` (keeps the clean-input accuracy). Lengths are in
+seconds so the model is the same at 25–60 fps.
+
+Example:
+    >>> cfg = DegradeConfig()
+    >>> out = degrade(sim_clip, np.random.default_rng(0), cfg)
+    >>> out.track, out.occluded.sum(), out.outlier.sum()
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from inference.clipio import BallTrack
+
+from .simulate import SimClip
+
+
+def _pair(name: str, v, lo: float = 0.0) -> tuple[float, float]:
+    try:
+        a, b = (float(x) for x in v)
+    except (TypeError, ValueError):
+        raise ValueError(f"DegradeConfig.{name} must be a [min, max] pair, got {v!r}") from None
+    if not (np.isfinite(a) and np.isfinite(b)) or a < lo or b < a:
+        raise ValueError(f"DegradeConfig.{name} must be [min, max] with {lo} <= min <= max, got {v!r}")
+    return a, b
+
+
+@dataclass(frozen=True)
+class DegradeConfig:
+    """Parameters of :func:`degrade` (see the module docstring); ``enabled: false`` keeps clean tracks.
+
+    Attributes:
+        enabled: degrade the training (and tuning) tracks at all.
+        p_clean: probability that a clip is left as annotated.
+        p_occlude_near, p_occlude_far: probability that a near / far player's hit is hidden.
+        occlude_s: [min, max] length (s) of the gap around a near hit (far hits: half).
+        miss_frac: fraction of the visible frames missed by random runs; miss_run_s: their length (s).
+        outlier_frac: fraction of the detections with a wrong position; outlier_run: run length (frames);
+        outlier_px: [min, max] offset (pixels).
+        jitter_px: [min, max] of the per-clip jitter σ (pixels).
+        p_smooth: probability that the pipeline's RTS smoother is applied.
+        every_epoch: draw new degradations each training epoch (else once).
+        val_copies: degraded copies of each validation clip used for checkpointing, temperature and
+            decoder tuning (beside the clean clip).
+    """
+
+    enabled: bool = True
+    p_clean: float = 0.2
+    p_occlude_near: float = 0.8
+    p_occlude_far: float = 0.3
+    occlude_s: tuple[float, float] = (5 / 30, 15 / 30)
+    miss_frac: float = 0.25
+    miss_run_s: tuple[float, float] = (3 / 30, 10 / 30)
+    outlier_frac: float = 0.1
+    outlier_run: tuple[float, float] = (1, 4)
+    outlier_px: tuple[float, float] = (15.0, 150.0)
+    jitter_px: tuple[float, float] = (1.0, 3.0)
+    p_smooth: float = 0.8
+    every_epoch: bool = True
+    val_copies: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("p_clean", "p_occlude_near", "p_occlude_far", "miss_frac", "outlier_frac", "p_smooth"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
+                raise ValueError(f"DegradeConfig.{name} must be a probability/fraction in [0, 1], got {v!r}")
+        if self.miss_frac >= 0.95 or self.outlier_frac >= 0.95:
+            raise ValueError("DegradeConfig.miss_frac and outlier_frac must be below 0.95 (nothing would be left)")
+        for name in ("occlude_s", "miss_run_s", "outlier_px", "jitter_px"):
+            object.__setattr__(self, name, _pair(name, getattr(self, name)))
+        run = _pair("outlier_run", self.outlier_run, lo=1)
+        object.__setattr__(self, "outlier_run", (int(run[0]), int(run[1])))
+        if self.miss_run_s[0] <= 0:
+            raise ValueError(f"DegradeConfig.miss_run_s must be positive, got {self.miss_run_s}")
+        if int(self.val_copies) < 0:
+            raise ValueError(f"DegradeConfig.val_copies must be >= 0, got {self.val_copies}")
+
+    @classmethod
+    def from_dict(cls, d) -> DegradeConfig:
+        if isinstance(d, DegradeConfig):
+            return d
+        d = dict(d or {"enabled": False})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown data.degrade keys {unknown}; known: {sorted(known)}")
+        return cls(**d)
+
+
+@dataclass
+class Degraded:
+    """A degraded track and what was done to it (masks over the clip's frames, before smoothing).
+
+    Attributes:
+        track: the track as the pipeline's ``ball.csv`` would hold it.
+        occluded: ``(T,)`` frames hidden around hits; missed: ``(T,)`` frames missed by random runs;
+        outlier: ``(T,)`` detections given a wrong position; smoothed: whether the smoother ran.
+    """
+
+    track: BallTrack
+    occluded: np.ndarray
+    missed: np.ndarray
+    outlier: np.ndarray
+    smoothed: bool
+
+
+def _frames(seconds: float, fps: float) -> int:
+    return max(1, int(round(seconds * fps)))
+
+
+def occlusion_mask(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig) -> np.ndarray:
+    """``(T,)`` frames hidden around the players' hits (the body in front of the ball)."""
+    n = sim.n_frames
+    mask = np.zeros(n, bool)
+    for f, label in zip(sim.events.frame, sim.events.event):
+        p, scale = {"player_near": (cfg.p_occlude_near, 1.0), "player_far": (cfg.p_occlude_far, 0.5)}.get(
+            str(label), (0.0, 0.0))
+        if p <= 0 or rng.random() >= p:
+            continue
+        length = _frames(scale * rng.uniform(*cfg.occlude_s), sim.fps)
+        start = int(f) - int(rng.integers(0, length))  # the hit somewhere inside the gap
+        mask[max(start, 0):max(start + length, 0)] = True
+    return mask
+
+
+def miss_runs(visible: np.ndarray, already: np.ndarray, fps: float, rng: np.random.Generator,
+              cfg: DegradeConfig) -> np.ndarray:
+    """``(T,)`` runs of misses added until ``miss_frac`` of the visible frames are missed by them."""
+    n = len(visible)
+    target = int(round(cfg.miss_frac * visible.sum()))
+    mask = np.zeros(n, bool)
+    idx = np.flatnonzero(visible)
+    tries = 0
+    while (mask & visible).sum() < target and len(idx) and tries < 10_000:
+        tries += 1
+        length = _frames(rng.uniform(*cfg.miss_run_s), fps)
+        a = int(idx[rng.integers(0, len(idx))])
+        run = np.zeros(n, bool)
+        run[a:a + length] = True
+        need = target - (mask & visible).sum()
+        gain = run & visible & ~mask
+        if gain.sum() > need:  # trim the last run so the rate is met exactly
+            keep = np.flatnonzero(gain)[:need]
+            run[:] = False
+            run[keep] = True
+        mask |= run
+    return mask & ~already
+
+
+def outlier_positions(xy_px: np.ndarray, detected: np.ndarray, rng: np.random.Generator,
+                      cfg: DegradeConfig) -> np.ndarray:
+    """Replace ``outlier_frac`` of the detected positions (pixels, in place) by wrong ones; returns the mask."""
+    n = len(detected)
+    target = int(round(cfg.outlier_frac * detected.sum()))
+    mask = np.zeros(n, bool)
+    idx = np.flatnonzero(detected)
+    truth = xy_px.copy()
+    tries = 0
+    while mask.sum() < target and len(idx) and tries < 10_000:
+        tries += 1
+        a = int(idx[rng.integers(0, len(idx))])
+        length = min(int(rng.integers(cfg.outlier_run[0], cfg.outlier_run[1] + 1)), target - int(mask.sum()))
+        run = [k for k in range(a, min(a + length, n)) if detected[k] and not mask[k]]
+        if not run:
+            continue
+        ang = rng.uniform(0, 2 * np.pi)
+        off = rng.uniform(*cfg.outlier_px) * np.array([np.cos(ang), np.sin(ang)])
+        kind = rng.integers(0, 3)
+        for k in run:
+            if kind == 0:    # a blob beside the ball, moving with it
+                xy_px[k] = truth[k] + off
+            elif kind == 1:  # stuck on a reflection
+                xy_px[k] = truth[run[0]] + off
+            else:            # lagging behind, pushed off
+                lag = int(rng.integers(2, 7))
+                src = truth[max(k - lag, 0)]
+                xy_px[k] = (src if np.isfinite(src).all() else truth[k]) + off
+            mask[k] = True
+    return mask
+
+
+def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = DegradeConfig(),
+            track: BallTrack | None = None) -> Degraded:
+    """The clip's ball (``track``, default ``sim.ball``, one row per frame) as the detection pipeline would
+    write it. Rows stay one per frame; missed frames get visibility 0 and NaN positions."""
+    from inference.detection.smooth import smooth_track
+
+    ball = track if track is not None else sim.ball
+    n = sim.n_frames
+    none = np.zeros(n, bool)
+    if not cfg.enabled or rng.random() < cfg.p_clean:
+        return Degraded(ball, none, none.copy(), none.copy(), False)
+    if len(ball) != n or not np.array_equal(ball.frame, np.arange(n)):
+        raise ValueError(f"{sim.name}: degrade needs one ball row per frame (0..{n - 1}), got {len(ball)} rows")
+    size = np.array([sim.width, sim.height], float)
+    visible = (ball.visibility > 0) & np.isfinite(ball.xy).all(axis=1)
+    xy = ball.xy * size
+    xy[visible] += rng.normal(0.0, rng.uniform(*cfg.jitter_px), (int(visible.sum()), 2))
+    occluded = occlusion_mask(sim, rng, cfg) & visible
+    missed = miss_runs(visible, occluded, sim.fps, rng, cfg)
+    detected = visible & ~occluded & ~missed
+    outlier = outlier_positions(xy, detected, rng, cfg)
+    xy = np.clip(xy, 0.0, size)
+    vis = detected.astype(np.int8)
+    xy[~detected] = np.nan
+    out = BallTrack(np.arange(n), vis, xy / size)
+    smoothed = bool(rng.random() < cfg.p_smooth) and detected.sum() > 0
+    if smoothed:
+        out = smooth_track(out, sim.width, sim.height, sim.fps).track
+    return Degraded(out, occluded, missed, outlier, smoothed)
+
+
+def degrade_all(clips: list[SimClip], seed: int, cfg: DegradeConfig) -> list[BallTrack]:
+    """Degraded tracks of many clips; the same seed gives the same tracks."""
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(clips))]
+    return [degrade(c, r, cfg).track for c, r in zip(clips, rngs)]
