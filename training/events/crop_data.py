@@ -7,7 +7,8 @@ ball crops of every reference frame, extracted once by streaming the video and c
 settings). When the dataset folder is missing, the embedded ``datasets/sample`` clip of the sport is used
 for every split (enough for a smoke run, not for a model; a warning says so).
 
-Batches: ``x (B, W, F) float32`` windows of features, ``crops (B, W, S, S, 3) uint8``, ``y (B,) int64``.
+Batches (:class:`CropChunkSet`): ``x (B, L + W - 1, F) float32`` features of runs of frames, ``crops
+(B, L + W - 1, S, S, 3) uint8``, ``y (B, L) int64`` labels of the L windows of each run (-1 = padding).
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from inference.events.classes import ClassSet
 from inference.events.crop import CropConfig, extract_crops
 from inference.events.features import FeatureConfig, dense_xy, resample_xy, window_labels, window_starts
 
-from .data import BalancedSampler, LabelledClip, clips_from_folder, label_clips
+from .data import LabelledClip, clips_from_folder, label_clips
 
 log = logging.getLogger(__name__)
 SAMPLE_ROOT = Path(__file__).resolve().parents[2] / "datasets" / "sample"
@@ -99,51 +100,62 @@ def load_crop_clips(root: str | Path | None, split: str, class_set: ClassSet, fe
     return out
 
 
-class CropWindowSet(Dataset):
-    """All windows of many clips, as indices into per-clip padded arrays (crops are not duplicated).
+class CropChunkSet(Dataset):
+    """Chunks of ``chunk`` consecutive windows of a clip, with the frames they cover (the CNN then runs
+    once per frame, not once per window).
 
-    Item ``i`` → ``(x (W, F) float32, crops (W, S, S, 3) uint8, y int64)``; ``y`` (all labels) is a tensor
-    for :class:`~training.events.data.BalancedSampler`.
+    Item → ``(x (L + W - 1, F) float32, crops (L + W - 1, S, S, 3) uint8, y (L,) int64)``: frames of the
+    clip zero-padded by W at both ends, from padded index ``s`` on, and the labels of the L windows that
+    start at ``s .. s + L - 1`` (:func:`~inference.events.features.window_labels`). Chunks start every
+    ``stride`` windows; the last ones are padded with label -1 (ignored).
     """
 
-    def __init__(self, clips: list[CropClip], window: int, last_k: int):
-        self.window = window
-        self.feats, self.crops, index, ys = [], [], [], []
+    def __init__(self, clips: list[CropClip], window: int, last_k: int, chunk: int = 96, stride: int | None = None):
+        self.window, self.chunk = int(window), int(chunk)
+        stride = int(stride or chunk)
+        self.feats, self.crops, self.labels, index = [], [], [], []
+        span = self.chunk + self.window - 1
         for k, c in enumerate(clips):
+            n_win = len(window_starts(len(c.lc.feats), window))
+            extra = span - window + ((-n_win) % stride) + stride  # room for the last, partly empty chunk
             F = c.lc.feats.shape[1]
-            pad_f = np.zeros((window, F), np.float32)
-            pad_c = np.zeros((window, *c.crops.shape[1:]), np.uint8)
-            self.feats.append(torch.from_numpy(np.concatenate([pad_f, c.lc.feats, pad_f]).astype(np.float32)))
-            self.crops.append(torch.from_numpy(np.concatenate([pad_c, c.crops, pad_c])))
-            starts = window_starts(len(c.lc.feats), window)
-            index.append(np.stack([np.full(len(starts), k), starts], 1))
-            ys.append(window_labels(c.lc.y, window, last_k))
-        self.index = np.concatenate(index) if index else np.zeros((0, 2), np.int64)
-        self.y = torch.from_numpy(np.concatenate(ys)) if ys else torch.zeros(0, dtype=torch.long)
+            self.feats.append(torch.from_numpy(np.concatenate(
+                [np.zeros((window, F), np.float32), c.lc.feats, np.zeros((window + extra, F), np.float32)])))
+            z = np.zeros((window, *c.crops.shape[1:]), np.uint8)
+            self.crops.append(torch.from_numpy(np.concatenate([z, c.crops, np.zeros((window + extra,
+                                                                                        *c.crops.shape[1:]), np.uint8)])))
+            y = np.full(n_win + extra + stride, -1, np.int64)
+            y[:n_win] = window_labels(c.lc.y, window, last_k)
+            self.labels.append(torch.from_numpy(y))
+            index += [(k, s) for s in range(0, n_win, stride)]
+        self.index = index
 
     def __len__(self) -> int:
-        return len(self.y)
+        return len(self.index)
 
     def __getitem__(self, i):
         k, s = self.index[i]
-        return self.feats[k][s:s + self.window], self.crops[k][s:s + self.window], self.y[i]
+        span = self.chunk + self.window - 1
+        return self.feats[k][s:s + span], self.crops[k][s:s + span], self.labels[k][s:s + self.chunk]
 
 
 class CropEventDataModule(L.LightningDataModule):
     """Rendered clips of a dataset folder → balanced windows with crops.
 
     Args:
-        sport, class_set, features, window, last_k, on_unmapped, neg_ratio, batch_size: as
+        sport, class_set, features, window, last_k, on_unmapped: as
         :class:`~training.events.data.EventDataModule`. root: dataset folder (``manifest.yaml``).
-        crop: :class:`CropConfig` fields. n_train, n_val, n_test: at most this many clips of each split
+        crop: :class:`CropConfig` fields. chunk: windows per chunk (train chunks start every ``chunk // 3``
+        windows, shuffled; validation chunks tile the clips); batch_size: chunks per batch.
+        n_train, n_val, n_test: at most this many clips of each split
         (None = all). cache_dir: crop cache. seed: the sampler's.
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
                  crop: dict | None = None, window: int = 24, last_k: int = 6, root: str | None = None,
                  n_train: int | None = None, n_val: int | None = None, n_test: int | None = None,
-                 on_unmapped: str = "error", neg_ratio: float = 2.0, batch_size: int = 128, num_workers: int = 0,
-                 cache_dir: str | None = None, seed: int = 0, augment: dict | None = None):
+                 on_unmapped: str = "error", chunk: int = 96, batch_size: int = 8, num_workers: int = 0,
+                 cache_dir: str | None = None, seed: int = 0):
         super().__init__()
         self.sport, self.root, self.cache_dir = sport, root, cache_dir
         self.class_set = ClassSet.load(class_set)
@@ -151,10 +163,10 @@ class CropEventDataModule(L.LightningDataModule):
         self.crop = CropConfig.from_dict(crop or {})
         self.window, self.last_k = int(window), int(last_k)
         self.limits = {"train": n_train, "val": n_val, "test": n_test}
-        self.on_unmapped, self.neg_ratio = on_unmapped, float(neg_ratio)
+        self.on_unmapped, self.chunk = on_unmapped, int(chunk)
         self.batch_size, self.num_workers, self.seed = int(batch_size), int(num_workers), int(seed or 0)
         self._clips: dict[str, list[CropClip]] = {}
-        self.sets: dict[str, CropWindowSet] = {}
+        self.sets: dict[str, CropChunkSet] = {}
 
     def clips(self, split: str) -> list[CropClip]:
         if split not in self._clips:
@@ -169,12 +181,12 @@ class CropEventDataModule(L.LightningDataModule):
     def setup(self, stage: str | None = None) -> None:
         for split in ("train", "val"):
             if split not in self.sets:
-                self.sets[split] = CropWindowSet(self.clips(split), self.window, self.last_k)
+                stride = max(self.chunk // 3, 1) if split == "train" else self.chunk
+                self.sets[split] = CropChunkSet(self.clips(split), self.window, self.last_k, self.chunk, stride)
 
     def train_dataloader(self) -> DataLoader:
-        ds = self.sets["train"]
-        return DataLoader(ds, batch_size=self.batch_size, num_workers=self.num_workers,
-                          sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed))
+        return DataLoader(self.sets["train"], batch_size=self.batch_size, num_workers=self.num_workers,
+                          shuffle=True, generator=torch.Generator().manual_seed(self.seed))
 
     def val_dataloader(self) -> DataLoader:
-        return DataLoader(self.sets["val"], batch_size=self.batch_size * 2, num_workers=self.num_workers)
+        return DataLoader(self.sets["val"], batch_size=self.batch_size, num_workers=self.num_workers)

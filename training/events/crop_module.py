@@ -38,7 +38,8 @@ class CropAugment:
 
 def augment_crop_batch(x: torch.Tensor, crops: torch.Tensor, y: torch.Tensor, cfg: CropAugment,
                        features: FeatureConfig, mirror_perm: torch.Tensor, gen: torch.Generator | None = None):
-    """Augment windows ``x (B, W, F)``, ``crops (B, W, S, S, 3) uint8`` and labels ``y (B,)``."""
+    """Augment runs of frames ``x (B, T, F)``, ``crops (B, T, S, S, 3) uint8`` and their labels ``y (B,)``
+    or ``(B, L)`` (-1 = ignored, kept)."""
     if not cfg.enabled or len(x) == 0:
         return x, crops, y
     x, crops = x.clone(), crops.clone()
@@ -50,7 +51,8 @@ def augment_crop_batch(x: torch.Tensor, crops: torch.Tensor, y: torch.Tensor, cf
     if features.velocity:
         x[:, :, 2] = torch.where(mirror[:, None], -x[:, :, 2], x[:, :, 2])
     crops[mirror] = crops[mirror].flip(3)
-    y = torch.where(mirror, mirror_perm[y], y)
+    m = mirror.view(-1, *[1] * (y.dim() - 1))
+    y = torch.where(m & (y >= 0), mirror_perm[y.clamp(min=0)], y)
     jit = torch.randn(B, W, 2, generator=gen) * (cfg.jitter_px / 1280.0)
     x[:, :, :2] = torch.where(known[..., None], x[:, :, :2] + jit, x[:, :, :2])
     if cfg.max_shift_px > 0:
@@ -99,14 +101,18 @@ class CropHitNetModule(L.LightningModule):
         class_set, features, window, last_k: as :class:`~training.events.module.HitNetModule`.
         crop: :class:`CropConfig` fields; embed, channels: the CNN. hidden, layers, bidirectional, dropout:
         the GRU head. lr, weight_decay, head_lr_scale: Adam. init_from: a HitNet model file to warm-start
-        the head. augment: :class:`CropAugment` fields.
+        the head. augment: :class:`CropAugment` fields. neg_weight: loss weight of windows without an
+        event (class balancing; events are ~10 % of windows).
+
+    Batches are chunks of consecutive windows (:class:`~training.events.crop_data.CropChunkSet`).
     """
 
     def __init__(self, class_set: str | dict = "padel6", features: dict | None = None, crop: dict | None = None,
                  window: int = 24, last_k: int = 6, hidden: int = 64, layers: int = 2, bidirectional: bool = True,
                  dropout: float = 0.1, embed: int = 16, channels: list[int] | tuple[int, ...] = (16, 32, 32),
                  lr: float = 2e-3, weight_decay: float = 1e-4, head_lr_scale: float = 1.0,
-                 init_from: str | None = None, augment: dict | None = None, lr_patience: int = 4):
+                 init_from: str | None = None, augment: dict | None = None, lr_patience: int = 4,
+                 neg_weight: float = 0.25):
         super().__init__()
         self.save_hyperparameters()
         self.class_set = ClassSet.load(class_set)
@@ -118,24 +124,38 @@ class CropHitNetModule(L.LightningModule):
             warm_start_head(self.net, init_from)
         self.aug = CropAugment(**(augment or {}))
         self.register_buffer("mirror_perm", torch.as_tensor(self.class_set.mirror_permutation()), persistent=False)
-        self.loss = nn.CrossEntropyLoss()
         self._val = []
 
     def forward(self, x: torch.Tensor, crops: torch.Tensor) -> torch.Tensor:
-        return self.net(x, crops)
+        """Chunks ``x (B, T, F)``, ``crops (B, T, S, S, 3)`` → logits ``(B, L, C)`` of their
+        ``L = T - W + 1`` windows (the CNN runs once per frame)."""
+        B, T, F = x.shape
+        W = int(self.hparams.window)
+        z = self.net.frame_inputs(x.reshape(B * T, F), crops.reshape(B * T, *crops.shape[2:])).reshape(B, T, -1)
+        wins = z.unfold(1, W, 1).permute(0, 1, 3, 2)  # (B, L, W, D)
+        L = wins.shape[1]
+        return self.net.head(wins.reshape(B * L, W, -1)).reshape(B, L, -1)
+
+    def chunk_loss(self, logits: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        """Cross-entropy over the valid windows, negatives weighted by ``neg_weight``."""
+        valid = y >= 0
+        ce = nn.functional.cross_entropy(logits[valid], y[valid], reduction="none")
+        w = torch.where(y[valid] == 0, float(self.hparams.neg_weight), 1.0)
+        return (ce * w).sum() / w.sum().clamp(min=1e-6)
 
     def training_step(self, batch, _):
         x, crops, y = batch
         x, crops, y = augment_crop_batch(x, crops, y, self.aug, self.features, self.mirror_perm)
-        loss = self.loss(self(x, crops), y)
+        loss = self.chunk_loss(self(x, crops), y)
         self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y))
         return loss
 
     def validation_step(self, batch, _):
         x, crops, y = batch
         logits = self(x, crops)
-        self.log("val/loss", self.loss(logits, y), on_epoch=True, batch_size=len(y))
-        self._val.append((logits.argmax(1).cpu(), y.cpu()))
+        self.log("val/loss", self.chunk_loss(logits, y), on_epoch=True, batch_size=len(y))
+        valid = y >= 0
+        self._val.append((logits.argmax(-1)[valid].cpu(), y[valid].cpu()))
 
     def on_validation_epoch_end(self) -> None:
         if not self._val:

@@ -41,14 +41,17 @@ def frames_scorer(det: EventDetector):
 
 def calibrate_crop(module, dm: CropEventDataModule) -> float:
     """Fit the temperature on the validation windows (stored in the network)."""
-    ds = dm.sets["val"]
-    module.net.eval()
+    module.eval()
+    logits, labels = [], []
     with torch.no_grad():
         module.net.temperature.fill_(1.0)
-        logits = [module.net(x, c) for x, c, _ in torch.utils.data.DataLoader(ds, batch_size=512)]
+        for x, c, y in torch.utils.data.DataLoader(dm.sets["val"], batch_size=8):
+            out = module(x, c)
+            logits.append(out[y >= 0])
+            labels.append(y[y >= 0])
     if not logits:
         return 1.0
-    t = fit_temperature(torch.cat(logits), ds.y)
+    t = fit_temperature(torch.cat(logits), torch.cat(labels))
     module.net.temperature.fill_(t)
     return t
 
