@@ -10,9 +10,11 @@ tracker's coasts are dropped by the pipeline, so every miss is a gap (no row / v
 smoother then drops isolated outliers and smooths each piece. :func:`degrade` applies, in this order:
 
 1. jitter: Gaussian, σ drawn per clip in ``jitter_px`` (pixels of the clip's frame);
-2. occlusion gaps around hits: each ``player_near`` hit is hidden with probability ``p_occlude_near`` for
-   ``occlude_s`` seconds (the hit at a random place inside the gap), ``player_far`` hits with
-   ``p_occlude_far`` for half as long;
+2. gaps around events: each ``player_near`` hit is hidden with probability ``p_occlude_near`` for
+   ``occlude_s`` seconds (the body; the hit at a random place inside the gap), ``player_far`` hits with
+   ``p_occlude_far`` for half as long, and every other event (bounce, wall, net) with ``p_gap_event`` for
+   ``event_gap_s`` — on real tracks the tracker and the smoother's change-point cuts lose the ball at
+   most direction changes, so the ball is missing around most events;
 3. random runs of misses of ``miss_run_s`` seconds until ``miss_frac`` of the visible frames are missed
    by them (on top of the occlusions);
 4. wrong positions on ``outlier_frac`` of the remaining detections, in runs of ``outlier_run`` frames,
@@ -58,6 +60,7 @@ class DegradeConfig:
         p_clean: probability that a clip is left as annotated.
         p_occlude_near, p_occlude_far: probability that a near / far player's hit is hidden.
         occlude_s: [min, max] length (s) of the gap around a near hit (far hits: half).
+        p_gap_event, event_gap_s: probability and [min, max] length (s) of a gap around any other event.
         miss_frac: fraction of the visible frames missed by random runs; miss_run_s: their length (s).
         outlier_frac: fraction of the detections with a wrong position; outlier_run: run length (frames);
         outlier_px: [min, max] offset (pixels).
@@ -73,9 +76,11 @@ class DegradeConfig:
     p_occlude_near: float = 0.8
     p_occlude_far: float = 0.3
     occlude_s: tuple[float, float] = (5 / 30, 15 / 30)
-    miss_frac: float = 0.25
+    p_gap_event: float = 0.5
+    event_gap_s: tuple[float, float] = (3 / 30, 8 / 30)
+    miss_frac: float = 0.2
     miss_run_s: tuple[float, float] = (3 / 30, 10 / 30)
-    outlier_frac: float = 0.1
+    outlier_frac: float = 0.12
     outlier_run: tuple[float, float] = (1, 4)
     outlier_px: tuple[float, float] = (15.0, 150.0)
     jitter_px: tuple[float, float] = (1.0, 3.0)
@@ -84,13 +89,13 @@ class DegradeConfig:
     val_copies: int = 1
 
     def __post_init__(self) -> None:
-        for name in ("p_clean", "p_occlude_near", "p_occlude_far", "miss_frac", "outlier_frac", "p_smooth"):
+        for name in ("p_clean", "p_occlude_near", "p_occlude_far", "p_gap_event", "miss_frac", "outlier_frac", "p_smooth"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
                 raise ValueError(f"DegradeConfig.{name} must be a probability/fraction in [0, 1], got {v!r}")
         if self.miss_frac >= 0.95 or self.outlier_frac >= 0.95:
             raise ValueError("DegradeConfig.miss_frac and outlier_frac must be below 0.95 (nothing would be left)")
-        for name in ("occlude_s", "miss_run_s", "outlier_px", "jitter_px"):
+        for name in ("occlude_s", "event_gap_s", "miss_run_s", "outlier_px", "jitter_px"):
             object.__setattr__(self, name, _pair(name, getattr(self, name)))
         run = _pair("outlier_run", self.outlier_run, lo=1)
         object.__setattr__(self, "outlier_run", (int(run[0]), int(run[1])))
@@ -133,15 +138,17 @@ def _frames(seconds: float, fps: float) -> int:
 
 
 def occlusion_mask(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig) -> np.ndarray:
-    """``(T,)`` frames hidden around the players' hits (the body in front of the ball)."""
+    """``(T,)`` frames hidden around the events: the players' hits (the body in front of the ball) and the
+    other events (the track lost at the direction change)."""
     n = sim.n_frames
     mask = np.zeros(n, bool)
+    hits = {"player_near": (cfg.p_occlude_near, cfg.occlude_s, 1.0),
+            "player_far": (cfg.p_occlude_far, cfg.occlude_s, 0.5)}
     for f, label in zip(sim.events.frame, sim.events.event):
-        p, scale = {"player_near": (cfg.p_occlude_near, 1.0), "player_far": (cfg.p_occlude_far, 0.5)}.get(
-            str(label), (0.0, 0.0))
+        p, span, scale = hits.get(str(label), (cfg.p_gap_event, cfg.event_gap_s, 1.0))
         if p <= 0 or rng.random() >= p:
             continue
-        length = _frames(scale * rng.uniform(*cfg.occlude_s), sim.fps)
+        length = _frames(scale * rng.uniform(*span), sim.fps)
         start = int(f) - int(rng.integers(0, length))  # the hit somewhere inside the gap
         mask[max(start, 0):max(start + length, 0)] = True
     return mask

@@ -29,13 +29,18 @@ import torch
 import yaml
 
 from inference.clipio import BallTrack, Clip, FormatError, Manifest, atomic_write_text, read_ball_csv
+from inference.events.classes import ClassSet
+from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
 from inference.events.metrics import EventCounts, format_event_table
 
-from .data import EventDataModule
+from .data import EventDataModule, WindowSet
 from .degrade import DegradeConfig, degrade_all
-from .evaluate import counts_for, detector_scorer, score_all
+from .evaluate import counts_for, detector_scorer, score_all, tune_decoder
+from .rf import ForestScorer
 from .simulate import SimClip, perturb
+
+CLASS_SET = ClassSet.load("padel6")
 
 
 @dataclass
@@ -143,11 +148,44 @@ def track_quality(rc: RealClip, tau_px: float = 10.0) -> tuple[float, float]:
     return good.sum() / max(seen_g.sum(), 1), good.sum() / max(seen_d.sum(), 1)
 
 
-def real_counts(det: EventDetector, clips: list[RealClip], detected: bool) -> EventCounts:
-    sims = [c.sim for c in clips]
+@dataclass
+class Entry:
+    """One model of the table: a scorer with its tuned decoder."""
+
+    name: str
+    scorer: object
+    params: DecodeParams
+    ref_fps: float | None
+
+
+def entry_of(path: Path) -> Entry:
+    det = EventDetector.from_checkpoint(path)
+    return Entry(model_name(path, det), detector_scorer(det), det.decode_params, det.ref_fps)
+
+
+def forest_entries(dm: EventDataModule) -> list[Entry]:
+    """The thesis's random forest trained on clean windows and on degraded windows, each with its decoder
+    tuned on the clean + degraded validation clips."""
+    val, val_tracks = dm.tuning_clips()
+    out = []
+    for name, clips in (("random forest, clean training tracks", dm.labelled("train")),
+                        ("random forest, degraded training tracks", dm.degraded("train", 0))):
+        forest = ForestScorer(dm.features, dm.class_set.n, dm.window, dm.last_k, "padel")
+        forest.fit(WindowSet(clips, dm.window, dm.last_k))
+        params, _ = tune_decoder(score_all(forest, val, val_tracks, desc="rf val"), val, dm.class_set,
+                                 dm.features.ref_fps, DecodeParams(thresholds=0.5), passes=1)
+        out.append(Entry(name, forest, params, dm.features.ref_fps))
+    return out
+
+
+def counts_of(e: Entry, sims: list[SimClip], tracks) -> EventCounts:
+    probs = score_all(e.scorer, sims, tracks, desc=e.name[:20])
+    return counts_for(probs, sims, CLASS_SET, e.ref_fps, e.params)
+
+
+def real_counts(e: Entry, clips: list[RealClip], detected: bool) -> EventCounts:
     tracks = [c.detected if detected else dense(c.sim.ball, c.sim.n_frames) for c in clips]
-    probs = score_all(detector_scorer(det), sims, tracks, desc="real clips")
-    return counts_for(probs, sims, det.class_set, det.ref_fps, det.decode_params)
+    return counts_of(e, [c.sim for c in clips], tracks)
 
 
 def model_name(path: Path, det: EventDetector) -> str:
@@ -166,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n-test", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1234)
     ap.add_argument("--cache-dir", default="data/events_cache")
+    ap.add_argument("--rf", action="store_true", help="also the random forest, trained on clean and on degraded "
+                    "tracks (the simulated train split; a few minutes)")
     ap.add_argument("--out", type=Path, help="also write the tables (markdown) here")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -174,7 +214,10 @@ def main(argv: list[str] | None = None) -> int:
     real = [from_infer_dir(s) for s in args.infer]
     if args.heatmaps:
         real += from_heatmaps(args.heatmaps, args.root)
-    dets = [(model_name(p, EventDetector.from_checkpoint(p)), EventDetector.from_checkpoint(p)) for p in args.models]
+    dm = EventDataModule(sport="padel", class_set="padel6", n_train=1000, n_val=100, n_test=args.n_test,
+                         seed=args.seed, cache_dir=args.cache_dir, window=24, degrade={"p_clean": 0.2},
+                         features={"ref_fps": 50, "velocity": True, "velocity_scale": 100})
+    entries = [entry_of(p) for p in args.models] + (forest_entries(dm) if args.rf else [])
     sections = []
     if real:
         lines = ["| real clip | fps | detected-ball recall | precision (≤ 10 px) | #gt events |", "|---|---|---|---|---|"]
@@ -184,21 +227,16 @@ def main(argv: list[str] | None = None) -> int:
         sections.append("\n".join(lines))
         for detected, what in ((False, "annotated ball"), (True, "**detected ball** (real detector → tracker → "
                                                              "coasts dropped → RTS smoother, as `rally3d infer`)")):
-            rows = [(name, real_counts(det, real, detected)) for name, det in dets]
+            rows = [(e.name, real_counts(e, real, detected)) for e in entries]
             sections.append(format_event_table(rows, title=f"**padel, {len(real)} rendered clips, {what}**, "
                                                "tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"))
     if not args.no_sim:
-        dm = EventDataModule(sport="padel", class_set="padel6", n_train=1000, n_val=100, n_test=args.n_test,
-                             seed=args.seed, cache_dir=args.cache_dir)
         test = [c.sim for c in dm.labelled("test")]
         rng = np.random.default_rng(7)
         conditions = (("annotated ball", None), ("detector-like ball (`perturb`)", [perturb(c, rng) for c in test]),
                       ("pipeline-like ball (`degrade`, every clip)", degrade_all(test, 7, DegradeConfig(p_clean=0.0))))
         for what, tracks in conditions:
-            rows = []
-            for name, det in dets:
-                probs = score_all(detector_scorer(det), test, tracks, desc=name[:20])
-                rows.append((name, counts_for(probs, test, det.class_set, det.ref_fps, det.decode_params)))
+            rows = [(e.name, counts_of(e, test, tracks)) for e in entries]
             sections.append(format_event_table(rows, title=f"**padel, {len(test)} held-out simulated clips, {what}**, "
                                                "tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"))
     text = "\n\n".join(sections)

@@ -10,7 +10,7 @@ from training.events.data import EventDataModule
 from training.events.degrade import DegradeConfig, degrade, degrade_all
 from training.events.simulate import simulate_clip
 
-OFF = dict(p_clean=0.0, p_occlude_near=0.0, p_occlude_far=0.0, miss_frac=0.0, outlier_frac=0.0,
+OFF = dict(p_clean=0.0, p_occlude_near=0.0, p_occlude_far=0.0, p_gap_event=0.0, miss_frac=0.0, outlier_frac=0.0,
            jitter_px=(0.0, 0.0), p_smooth=0.0)
 
 
