@@ -125,7 +125,8 @@ class BalancedSampler(Sampler):
     """Every positive window each epoch and a fresh random draw of ``neg_ratio`` × as many negatives
     (MonoTrack keeps each negative with probability #pos/#neg)."""
 
-    def __init__(self, labels: torch.Tensor, neg_ratio: float = 1.0, seed: int = 0):
+    def __init__(self, labels: torch.Tensor, neg_ratio: float = 1.0, seed: int = 0, on_epoch=None):
+        self.on_epoch = on_epoch  # called at the start of each epoch (e.g. new degraded tracks)
         self.pos = torch.nonzero(labels > 0).flatten()
         self.neg = torch.nonzero(labels == 0).flatten()
         self.n_neg = min(len(self.neg), int(round(neg_ratio * max(len(self.pos), 1))))
@@ -135,6 +136,8 @@ class BalancedSampler(Sampler):
         return len(self.pos) + self.n_neg
 
     def __iter__(self):
+        if self.on_epoch is not None:
+            self.on_epoch()
         neg = self.neg[torch.randperm(len(self.neg), generator=self.gen)[: self.n_neg]]
         idx = torch.cat([self.pos, neg])
         return iter(idx[torch.randperm(len(idx), generator=self.gen)].tolist())
@@ -316,15 +319,22 @@ class EventDataModule(L.LightningDataModule):
                 clips = clips + [c for k in range(int(self.degrade.val_copies)) for c in self.degraded("val", k)]
             self.sets[split] = WindowSet(clips, self.window, self.last_k)
 
-    def train_dataloader(self):
-        if self.degrade.enabled and self.degrade.every_epoch and self._draw > 0:
-            self.sets["train"] = WindowSet(self.degraded("train", self._draw), self.window, self.last_k)
+    def redraw(self) -> None:
+        """New degraded tracks for the training windows (in place: same windows, same labels); the first
+        call keeps the draw made by :meth:`setup`."""
+        if self._draw > 0:
+            ds = self.sets["train"]
+            ds.x = WindowSet(self.degraded("train", self._draw), self.window, self.last_k).x
         self._draw += 1
+
+    def train_dataloader(self):
         ds = self.sets["train"]
         if int((ds.y > 0).sum()) == 0:
             raise ValueError("the training split has no events: nothing to learn (check events.csv and the "
                              f"class set {self.class_set.name})")
-        return DataLoader(ds, batch_size=self.batch_size, sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed),
+        redraw = self.redraw if self.degrade.enabled and self.degrade.every_epoch else None
+        return DataLoader(ds, batch_size=self.batch_size,
+                          sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed, on_epoch=redraw),
                           num_workers=self.num_workers)
 
     def val_dataloader(self):

@@ -21,6 +21,7 @@ unless ``--no-sim``. Prints Markdown tables (``--out`` writes them).
 from __future__ import annotations
 
 import argparse
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -163,18 +164,28 @@ def entry_of(path: Path) -> Entry:
     return Entry(model_name(path, det), detector_scorer(det), det.decode_params, det.ref_fps)
 
 
-def forest_entries(dm: EventDataModule) -> list[Entry]:
+def forest_entries(dm: EventDataModule, cache: Path | None = None) -> list[Entry]:
     """The thesis's random forest trained on clean windows and on degraded windows, each with its decoder
-    tuned on the clean + degraded validation clips."""
+    tuned on the clean + degraded validation clips (pickled to ``cache`` when given, reused if there)."""
+    if cache is not None and Path(cache).is_file():
+        with open(cache, "rb") as fh:
+            return pickle.load(fh)
     val, val_tracks = dm.tuning_clips()
     out = []
-    for name, clips in (("random forest, clean training tracks", dm.labelled("train")),
-                        ("random forest, degraded training tracks", dm.degraded("train", 0))):
+    for name, split in (("random forest, clean training tracks", "clean"),
+                        ("random forest, degraded training tracks", "degraded")):
+        clips = dm.labelled("train") if split == "clean" else dm.degraded("train", 0)
         forest = ForestScorer(dm.features, dm.class_set.n, dm.window, dm.last_k, "padel")
         forest.fit(WindowSet(clips, dm.window, dm.last_k))
         params, _ = tune_decoder(score_all(forest, val, val_tracks, desc="rf val"), val, dm.class_set,
                                  dm.features.ref_fps, DecodeParams(thresholds=0.5), passes=1)
         out.append(Entry(name, forest, params, dm.features.ref_fps))
+    if cache is not None:
+        Path(cache).parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(cache).with_suffix(".tmp")
+        with open(tmp, "wb") as fh:
+            pickle.dump(out, fh)
+        tmp.replace(cache)
     return out
 
 
@@ -206,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache-dir", default="data/events_cache")
     ap.add_argument("--rf", action="store_true", help="also the random forest, trained on clean and on degraded "
                     "tracks (the simulated train split; a few minutes)")
+    ap.add_argument("--rf-cache", type=Path, help="pickle of the fitted forests (reused when present)")
     ap.add_argument("--out", type=Path, help="also write the tables (markdown) here")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -217,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     dm = EventDataModule(sport="padel", class_set="padel6", n_train=1000, n_val=100, n_test=args.n_test,
                          seed=args.seed, cache_dir=args.cache_dir, window=24, degrade={"p_clean": 0.2},
                          features={"ref_fps": 50, "velocity": True, "velocity_scale": 100})
-    entries = [entry_of(p) for p in args.models] + (forest_entries(dm) if args.rf else [])
+    entries = [entry_of(p) for p in args.models] + (forest_entries(dm, args.rf_cache) if args.rf else [])
     sections = []
     if real:
         lines = ["| real clip | fps | detected-ball recall | precision (≤ 10 px) | #gt events |", "|---|---|---|---|---|"]

@@ -94,8 +94,12 @@ def test_data_module_draws_new_degradations_each_epoch(tmp_path):
     dm = EventDataModule(n_train=3, n_val=2, n_test=2, seed=77, window=24, cache_dir=str(tmp_path),
                          degrade={"p_clean": 0.0}, features={"ref_fps": 50, "velocity_scale": 100})
     dm.setup("fit")
-    first = dm.train_dataloader().dataset.x.clone()
-    second = dm.train_dataloader().dataset.x
+    loader = dm.train_dataloader()
+    ds = loader.dataset
+    list(iter(loader.sampler))  # epoch 1: the draw made by setup
+    first = ds.x.clone()
+    list(iter(loader.sampler))  # epoch 2: a new draw, same windows and labels
+    second = ds.x
     assert first.shape == second.shape and not np.allclose(first.numpy(), second.numpy())
     clean = len(dm.labelled("val"))
     sims, tracks = dm.tuning_clips()
