@@ -219,6 +219,13 @@ def _events_run(ctx: Context) -> Outcome:
                    ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")")
 
 
+def _events_weights(ctx: Context) -> Path:
+    """The hit-event model file the stage will load (so a new shipped model invalidates the cache)."""
+    from inference.events.detector import default_weights
+
+    return Path(ctx.cfg.events) if ctx.cfg.events is not None else default_weights(ctx.clip.info.sport)
+
+
 # ------------------------------------------------------------------------------------------ players
 def _players_run(ctx: Context) -> Outcome:
     from inference.players.backends import make_backend
@@ -282,7 +289,7 @@ def build_stages() -> list[Stage]:
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
-                                     "weights": ctx.cfg.events},
+                                     "weights": _events_weights(ctx)},
               lambda ctx: {"sport": ctx.clip.info.sport}, lambda ctx: [ctx.clip.events_path], _events_run,
               requires=("smooth",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
