@@ -67,7 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", default="test", help="split of --root to evaluate, or 'all'")
     ap.add_argument("--val-root", type=Path, help="dataset whose val split re-tunes HitNet's decoder (default --root)")
     ap.add_argument("--crop", nargs="*", type=Path, default=[], help="crop model files")
-    ap.add_argument("--hitnet", type=Path, default=ROOT / "inference" / "weights" / "hitnet_padel.pth.tar")
+    ap.add_argument("--hitnet", nargs="+", type=Path, default=[ROOT / "inference" / "weights" / "hitnet_padel.pth.tar"],
+                    help="ball-only HitNet model files")
+    ap.add_argument("--retune", action="store_true", help="also HitNet with its decoder re-tuned on the val clips")
     ap.add_argument("--rf-train", type=int, default=1000, help="simulated clips for the random forest (0: none)")
     ap.add_argument("--detector-cache", type=Path, default=ROOT / "runs" / "tune_tracker")
     ap.add_argument("--out", type=Path, help="also write the tables (markdown) here")
@@ -79,16 +81,17 @@ def main(argv: list[str] | None = None) -> int:
     splits = ("train", "val", "test") if args.split == "all" else (args.split,)
     test = [c for s in splits for c in clips_from_folder(args.root, s)]
     val = clips_from_folder(args.val_root or args.root, "val")
-    hit = EventDetector.from_checkpoint(args.hitnet)
-    class_set: ClassSet = hit.class_set
     entries = []  # (name, scorer, decode params, ref fps)
-    entries.append((f"HitNet ball-only ({args.hitnet.name}, shipped decoder)", frames_scorer(hit), hit.decode_params,
-                    hit.ref_fps))
-    tuned = deepcopy(hit)
-    tuned.decode_params, _ = tune_decoder(score_all(frames_scorer(hit), val, desc="hitnet val"), val, class_set,
-                                          hit.ref_fps, hit.decode_params)
-    entries.append((f"HitNet ball-only ({args.hitnet.name}, decoder tuned on rendered val)", frames_scorer(tuned),
-                    tuned.decode_params, hit.ref_fps))
+    for path in args.hitnet:
+        hit = EventDetector.from_checkpoint(path)
+        entries.append((f"HitNet ball-only ({path.name})", frames_scorer(hit), hit.decode_params, hit.ref_fps))
+        if args.retune:
+            tuned = deepcopy(hit)
+            tuned.decode_params, _ = tune_decoder(score_all(frames_scorer(hit), val, desc="hitnet val"), val,
+                                                  hit.class_set, hit.ref_fps, hit.decode_params)
+            entries.append((f"HitNet ball-only ({path.name}, decoder tuned on rendered val)", frames_scorer(tuned),
+                            tuned.decode_params, hit.ref_fps))
+    class_set: ClassSet = hit.class_set
     if args.rf_train:
         from .data import EventDataModule, WindowSet
         from .rf import ForestScorer
