@@ -27,7 +27,6 @@ from inference.clipio import BallTrack, atomic_write_text
 from inference.events.classes import ClassSet
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
-from inference.events.features import FeatureConfig
 from inference.events.metrics import format_event_table
 
 from .crop_run import frames_scorer
