@@ -40,7 +40,13 @@ def run(args: argparse.Namespace) -> int:
                 continue
     n_frames = info.n_frames or (int(ball.frame[-1]) + 1 if len(ball) else 0)
     det = EventDetector.from_checkpoint(args.weights, sport=info.sport)
-    result = det.predict(ball, info.fps, info.width, info.height, camera=camera, n_frames=n_frames)
+    frames = clip.frames(cache_size=0) if det.kind == "crop" else None  # the crop model looks at the video
+    try:
+        result = det.predict(ball, info.fps, info.width, info.height, camera=camera, n_frames=n_frames,
+                             frames=frames)
+    finally:
+        if frames is not None:
+            frames.close()
     path = write_events_csv(args.out or clip.events_path, result.events)
     counts = {}
     for e in result.events.event:

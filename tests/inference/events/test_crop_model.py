@@ -135,3 +135,15 @@ def test_crop_model_without_frames_is_a_clear_error():
         det.ref_probs(ball, 50, 50.0)
     with pytest.raises(ValueError, match="needs its network"):
         EventDetector("crop", det.class_set, det.features, det.decode_params)
+
+
+def test_events_command_feeds_the_frames_to_a_crop_model(tmp_path):
+    import shutil
+
+    from inference.cli import main
+
+    root = tmp_path / "clip"
+    shutil.copytree(SAMPLE, root)
+    path = _crop_detector().save(tmp_path / "crop.pth.tar")
+    assert main(["events", str(root), "--weights", str(path), "--out", str(tmp_path / "ev.csv")]) == 0
+    assert (tmp_path / "ev.csv").read_text().startswith("frame,event")
