@@ -23,7 +23,7 @@ STAGE_ERRORS = (StageError, FormatError, FileNotFoundError, ValueError, RuntimeE
 
 @dataclass
 class StageReport:
-    """One stage's line of the summary. status: done, cached, partial, skipped, failed or blocked."""
+    """One stage's line of the summary. status: done, cached, partial, skipped, failed, blocked or not run."""
 
     name: str
     status: str
@@ -104,14 +104,14 @@ def run_pipeline(clip: Clip, cfg: PipelineConfig | None = None, only: set[str] |
     ctx = Context(clip, court, cfg, RunState(clip.root))
     status: dict[str, str] = {}
     for stage in build_stages():
-        missing = [r for r in stage.requires if status.get(r) not in ("done", "cached", "partial")]
+        missing = [r for r in stage.requires if status.get(r) not in ("done", "cached", "partial", "not run")]
         if missing:
             status[stage.name] = "blocked"
             report.stages.append(StageReport(stage.name, "blocked", note=f"needs {', '.join(missing)}"))
             continue
         if only is not None and stage.name not in only:
-            status[stage.name] = "cached"
-            report.stages.append(StageReport(stage.name, "cached", note="not requested"))
+            status[stage.name] = "not run"
+            report.stages.append(StageReport(stage.name, "not run", note="not requested (--only)"))
             continue
         rep = _run_stage(stage, ctx, log)
         status[stage.name] = rep.status
