@@ -16,25 +16,8 @@ import time
 import torch
 from torch import nn
 
+from inference.models.fuse import fold_batchnorm
 from inference.models.registry import MODEL_NAMES, build_model
-
-
-def fold_batchnorm(model: nn.Module) -> tuple[nn.Module, int]:
-    """A copy with every Conv2d directly followed by a BatchNorm2d (inside an ``nn.Sequential``) folded into
-    the convolution; returns the model and the number of folded pairs (conv→ReLU→BN orders cannot fold)."""
-    model = copy.deepcopy(model).eval()
-    folded = 0
-    for seq in model.modules():
-        if not isinstance(seq, nn.Sequential):
-            continue
-        names = list(seq._modules)
-        for a, b in zip(names, names[1:]):
-            conv, bn = seq._modules[a], seq._modules[b]
-            if isinstance(conv, nn.Conv2d) and isinstance(bn, nn.BatchNorm2d):
-                seq._modules[a] = torch.nn.utils.fusion.fuse_conv_bn_eval(conv, bn)
-                seq._modules[b] = nn.Identity()
-                folded += 1
-    return model, folded
 
 
 def timed(fn, x, repeats: int) -> float:

@@ -4,7 +4,7 @@ Runs the whole pipeline (camera, detect, smooth, events, players with MoveNet, r
 output folder, prints the per-stage table with the slowest stage named, and the scores against the sample's
 ground truth. With ``--device cuda`` it measures the GPU (where one is lent).
 
-    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 4]
+    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1]
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--pose", default="movenet")
-    ap.add_argument("--batch-size", type=int, default=4)
+    ap.add_argument("--batch-size", type=int, default=1)
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_pipeline")
     args = ap.parse_args()
 

@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", choices=["wasb", "tracknetv2", "monotrack"], default="wasb")
     p.add_argument("--weights", type=Path, help="checkpoint (ours or WASB-SBDT); default: the shipped weights")
     p.add_argument("--step", type=int, default=3, help="window step in frames (3: non-overlapping, 1: pooled)")
-    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--batch-size", type=int, default=1,
+                   help="windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
     p.add_argument("--out", type=Path, help="write here instead of the clip's ball.csv")
     p.set_defaults(func=run)
 

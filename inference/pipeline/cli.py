@@ -32,7 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "rtmpose, rtmo")
     p.add_argument("--pose-model", type=Path, help="model file of the pose backend")
     p.add_argument("--method", default="joint", help="3D reconstruction method (default joint)")
-    p.add_argument("--batch-size", type=int, default=4, help="detector windows per forward pass (default 4)")
+    p.add_argument("--batch-size", type=int, default=1,
+                   help="detector windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
     p.add_argument("--step", type=int, default=3, help="detector window step in frames (default 3)")
     p.add_argument("--device", default="cpu", help="cpu or cuda (single clip)")
     p.add_argument("--only", help=f"comma-separated stages to run ({', '.join(STAGE_NAMES)}); the others are reused")

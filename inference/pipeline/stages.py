@@ -48,7 +48,7 @@ class PipelineConfig:
     detector: str = "wasb"
     detector_weights: Path | None = None
     step: int = 3
-    batch_size: int = 4
+    batch_size: int = 1
     events: Path | None = None
     pose: str = "auto"
     pose_model: Path | None = None
