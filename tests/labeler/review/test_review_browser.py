@@ -60,6 +60,10 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
         wait_until(lambda: session.playback.frame >= start + 8, timeout_s=15, what="playback to advance")
         page.get_by_role("checkbox", name="play").click()
         wait_until(lambda: not session.playback.playing, timeout_s=10, what="pause")
+        # on a busy machine playback may run on while the pause click is delivered (past the reconstructed
+        # frames, where no ball is drawn): look at a fixed frame 8 after the start for the on-screen check
+        session.playback.seek(start + 8)
+        session.render()
 
         def moved() -> bool:
             dismiss_toasts(page, wait_s=0.3)
