@@ -75,7 +75,7 @@ class BallDetectorRunner:
         # batch-norm folded into the convolutions and channels-last memory: ~1.3x and ~1.2-2x faster for these
         # convnets on a CPU (bench/bench_detectors.py); the runner's model is a folded copy, never trained
         self.model, _ = fold_batchnorm(self.model)
-        self.model = self.model.to(memory_format=torch.channels_last)
+        self.model = self.model.to(self.device, memory_format=torch.channels_last)
 
     @classmethod
     def from_weights(cls, name: str = "wasb", weights: str | Path | None = None, **kw) -> BallDetectorRunner:

@@ -119,8 +119,8 @@ def _install_court_points(clip: Clip, path: Path) -> None:
 
 def check_camera_size(cam: Camera, clip: Clip, path: Path | None = None) -> None:
     """Refuse a calibration made for another frame size (the projection would be wrong everywhere)."""
-    size = tuple(int(v) for v in cam.image_size) if getattr(cam, "image_size", None) is not None else None
-    if size is not None and size != (clip.info.width, clip.info.height):
+    size = tuple(int(v) for v in cam.image_size)
+    if size != (clip.info.width, clip.info.height):
         raise FormatError(path or clip.camera_path,
                           f"the calibration is for {size[0]}×{size[1]} frames but the video is "
                           f"{clip.info.width}×{clip.info.height}",

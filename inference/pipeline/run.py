@@ -53,9 +53,6 @@ class PipelineReport:
                 return False
         return True
 
-    def by_name(self, name: str) -> StageReport:
-        return next(s for s in self.stages if s.name == name)
-
     def table(self) -> str:
         """Per-stage timing summary (seconds, frames/s) with the slowest stage marked."""
         ran = [s for s in self.stages if s.status in ("done", "partial") and s.seconds > 0]

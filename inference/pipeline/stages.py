@@ -9,7 +9,7 @@ cheap and a calibration that does not fit the video must stop the run before the
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -70,7 +70,6 @@ class Context:
     court: Court
     cfg: PipelineConfig
     state: RunState
-    notes: dict[str, str] = field(default_factory=dict)
 
     def given_camera(self) -> bool:
         """Whether camera.yaml was supplied by the user (not computed by this pipeline)."""
@@ -81,9 +80,6 @@ class Context:
     def detected_path(self) -> Path:
         """The detector's raw track (before smoothing), kept so smoothing can be re-run alone."""
         return self.clip.root / STATE_DIR / "ball_detected.csv"
-
-    def n_frames(self) -> int:
-        return self.clip.n_frames
 
 
 @dataclass
@@ -156,14 +152,12 @@ def _detect_run(ctx: Context) -> Outcome:
 
     runner = BallDetectorRunner.from_weights(ctx.cfg.detector, _weights_path(ctx), step=ctx.cfg.step,
                                              batch_size=ctx.cfg.batch_size, device=ctx.cfg.device)
-    runner.model.to(ctx.cfg.device)
     result = runner.run(ctx.clip, progress=ctx.cfg.progress, tolerate_truncation=True)
     ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)
     write_ball_csv(ctx.detected_path, result.track)
     seen = int(np.sum(result.track.visibility > 0))
     note = f"ball in {seen}/{result.n_frames} frames"
     if result.truncated:
-        ctx.notes["detect"] = result.truncated
         return Outcome(result.n_frames, f"{note}; video truncated: {result.truncated}", partial=True)
     if seen == 0:
         raise StageError(f"{ctx.clip.video_path}: no ball detected in any of {result.n_frames} frames — check "

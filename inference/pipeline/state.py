@@ -16,6 +16,7 @@ from inference.clipio.atomic import atomic_write_text
 STATE_DIR = ".rally3d"
 STATE_FILE = "pipeline.json"
 _HASH_LIMIT = 64 << 20  # larger files (videos) are fingerprinted by size and modification time
+_HASHES: dict[tuple[str, int, int], str] = {}  # (path, size, mtime_ns) → content hash
 
 
 def fingerprint(path: Path) -> str | None:
@@ -26,11 +27,14 @@ def fingerprint(path: Path) -> str | None:
     st = path.stat()
     if st.st_size > _HASH_LIMIT:
         return f"size:{st.st_size}:mtime:{st.st_mtime_ns}"
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return "sha256:" + h.hexdigest()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _HASHES:  # the video is an input of several stages: read each unchanged file once
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+        _HASHES[key] = "sha256:" + h.hexdigest()
+    return _HASHES[key]
 
 
 def stage_key(inputs: dict[str, Path | None], params: dict[str, Any]) -> str:

@@ -18,14 +18,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from inference.clipio import atomic_write_text
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
 from inference.events.metrics import format_event_table
 from inference.events.physics import PhysicsParams
 
 from .data import EventDataModule, WindowSet
-from .evaluate import counts_for, detector_scorer, score_all, tune_decoder
+from .evaluate import TOLERANCE_NOTE, counts_for, detector_scorer, publish_tables, score_all, tune_decoder
 from .rf import ForestScorer
 from .simulate import perturb
 
@@ -86,11 +85,8 @@ def main(argv: list[str] | None = None) -> int:
             probs = score_all(scorer, test, tracks, desc=name[:20])
             rows.append((name, counts_for(probs, test, dm.class_set, ref_fps, params)))
         sections.append(format_event_table(rows, title=f"**{args.sport}, {len(test)} held-out simulated clips, "
-                                           f"{mode}**, tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"))
-    text = "\n\n".join(sections)
-    print(text)
-    if args.out:
-        atomic_write_text(args.out, text + "\n")
+                                           f"{mode}**, {TOLERANCE_NOTE}"))
+    publish_tables(sections, args.out)
     return 0
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from inference.clipio import BallTrack, atomic_write_text
+from inference.clipio import BallTrack
 from inference.events.classes import ClassSet
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
@@ -31,7 +31,7 @@ from inference.events.metrics import format_event_table
 
 from .crop_run import frames_scorer
 from .data import clips_from_folder
-from .evaluate import counts_for, score_all, tune_decoder
+from .evaluate import TOLERANCE_NOTE, counts_for, publish_tables, score_all, tune_decoder
 from .simulate import SimClip, perturb
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -129,11 +129,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append((name, counts_for(probs, test, class_set, ref_fps, params)))
         sections.append(format_event_table(rows, title=f"**{class_set.sport}, {len(test)} held-out rendered clips "
                                            f"of {args.root.name} ({args.split}, {n_events} events), {mode}**, "
-                                           "tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"))
-    text = "\n\n".join(sections)
-    print(text)
-    if args.out:
-        atomic_write_text(args.out, text + "\n")
+                                           + TOLERANCE_NOTE))
+    publish_tables(sections, args.out)
     return 0
 
 

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 import yaml
 
-from inference.clipio import BallTrack, Clip, FormatError, Manifest, atomic_write_text, read_ball_csv
+from inference.clipio import BallTrack, Clip, FormatError, Manifest, read_ball_csv
 from inference.events.classes import ClassSet
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
@@ -37,7 +37,8 @@ from inference.events.metrics import EventCounts, format_event_table
 
 from .data import EventDataModule, WindowSet
 from .degrade import DegradeConfig, degrade_all
-from .evaluate import counts_for, detector_scorer, score_all, tune_decoder
+from .evaluate import (TOLERANCE_NOTE, counts_for, detector_scorer, publish_tables, score_all,
+                       tune_decoder)
 from .rf import ForestScorer
 from .simulate import SimClip, perturb
 
@@ -241,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
                                                              "coasts dropped → RTS smoother, as `rally3d infer`)")):
             rows = [(e.name, real_counts(e, real, detected)) for e in entries]
             sections.append(format_event_table(rows, title=f"**padel, {len(real)} rendered clips, {what}**, "
-                                               "tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"))
+                                               + TOLERANCE_NOTE))
     if not args.no_sim:
         test = [c.sim for c in dm.labelled("test")]
         rng = np.random.default_rng(7)
@@ -250,11 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         for what, tracks in conditions:
             rows = [(e.name, counts_of(e, test, tracks)) for e in entries]
             sections.append(format_event_table(rows, title=f"**padel, {len(test)} held-out simulated clips, {what}**, "
-                                               "tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"))
-    text = "\n\n".join(sections)
-    print(text)
-    if args.out:
-        atomic_write_text(args.out, text + "\n")
+                                               + TOLERANCE_NOTE))
+    publish_tables(sections, args.out)
     return 0
 
 

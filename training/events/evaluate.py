@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from inference.clipio import BallTrack
+from inference.clipio import BallTrack, atomic_write_text
 from inference.events.classes import ClassSet
 from inference.events.decode import DecodeParams, decode
 from inference.events.detector import EventDetector
@@ -109,3 +109,15 @@ def labels_at_ref(sim: SimClip, class_set: ClassSet, features: FeatureConfig, n_
     y = np.zeros(n_ref, np.int64)
     y[np.clip(to_ref_frames(f, sim.fps, features.ref_fps), 0, n_ref - 1)] = c
     return y
+
+
+TOLERANCE_NOTE = "tolerance ±2 frames at 50 fps (±1 at 25/30 fps, ±2 at 60)"
+
+
+def publish_tables(sections: Sequence[str], out=None) -> str:
+    """Join comparison tables, print them, and write them atomically to ``out`` if given; returns the text."""
+    text = "\n\n".join(sections)
+    print(text)
+    if out:
+        atomic_write_text(out, text + "\n")
+    return text
