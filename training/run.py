@@ -3,6 +3,7 @@ from the composed config, then fit / test. Plain functions, testable without a c
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -68,9 +69,32 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
         from training.events.run import evaluate_events
 
         return evaluate_events(cfg)
+    from inference.detection.metrics import format_table
+
+    result = evaluate_detector(cfg)
+    print(f"\n{result.n_clips} clips of {cfg.data.root} ({cfg.split}), {result.n_frames} frames, "
+          f"{result.fps:.1f} frames/s end to end\n")
+    print("\n\n".join(format_table(rows, counts=True) for rows in result.tables.values()))
+    return result.f1s
+
+
+@dataclass
+class DetectorEval:
+    """What :func:`evaluate_detector` measured: per τ setting, one table row per post-processing."""
+
+    tables: dict[str, list]        # "tau4" / "tau10" → [TableRow(name, DetectionReport, fps), ...]
+    f1s: dict[str, float]          # "f1_tau4_tracker", "f1_tau10_max-score", ...
+    fps: float
+    n_frames: int
+    n_clips: int
+
+
+def evaluate_detector(cfg: DictConfig) -> DetectorEval:
+    """Run a ball detector over whole clips of ``cfg.split`` as inference does and score it at τ = 4 px
+    in original-frame pixels and τ = 10 px at 1280×720, for our tracker and the max-score baseline."""
     from inference.clipio import Clip, Manifest
     from inference.detection.detect import BallDetectorRunner
-    from inference.detection.metrics import TableRow, evaluate_detections, format_table
+    from inference.detection.metrics import TableRow, evaluate_detections
     from inference.detection.tracker import max_score_track
     from inference.models.checkpoint import load_weights
 
@@ -105,7 +129,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
             shown = np.isin(tr.state, (1,))  # detections only (coasted estimates are not claimed as seen)
             rows[name].append((shown, tr.xy, tr.score, gt.visibility, gt.xy * size, size))
     fps = frames / seconds
-    out, tables = {}, []
+    out, tables = {}, {}
     for tau, space, rescale in ((4.0, "original-frame px", False), (10.0, "px at 1280×720", True)):
         table = []
         for name, parts in rows.items():
@@ -116,7 +140,5 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
             report = evaluate_detections(vis, xy, score, gvis, gxy, tau_px=tau, ignore_flags=(3,), space=space)
             table.append(TableRow(f"{cfg.model.net.name} + {name}", report, fps))
             out[f"f1_tau{tau:g}_{name}"] = report.f1
-        tables.append(format_table(table, counts=True))
-    print(f"\n{len(clips)} clips of {root} ({cfg.split}), {frames} frames, {fps:.1f} frames/s end to end\n")
-    print("\n\n".join(tables))
-    return out
+        tables[f"tau{tau:g}"] = table
+    return DetectorEval(tables, out, fps, frames, len(clips))

@@ -32,11 +32,14 @@ class BallDetector(L.LightningModule):
         pretrained: a checkpoint to start from (WASB-SBDT public format or ours); never downloaded.
         tau_px: validation distance threshold in original-frame pixels.
         threshold: heatmap probability threshold of the blob detection.
+        channels_last: keep weights and inputs in NHWC memory format (about ×1.4 faster training steps
+            for WASB on a CPU; also what GPU tensor cores prefer). The state_dict is unchanged.
+        compile: run the forward pass through ``torch.compile`` (weights and checkpoints unchanged).
     """
 
     def __init__(self, net: nn.Module, loss: nn.Module, optimizer: Callable, scheduler: Callable | None = None,
                  pretrained: str | None = None, tau_px: float = 10.0, threshold: float = 0.5,
-                 compile: bool = False):
+                 channels_last: bool = False, compile: bool = False):
         super().__init__()
         # factories are kept as attributes, not hyperparameters: checkpoints stay loadable with weights_only
         self.save_hyperparameters(logger=False, ignore=["net", "loss", "optimizer", "scheduler"])
@@ -45,10 +48,17 @@ class BallDetector(L.LightningModule):
         self.loss_fn = loss
         if pretrained:
             load_weights(self.net, pretrained)
+        if channels_last:
+            self.net = self.net.to(memory_format=torch.channels_last)
+        # kept out of the module tree so state_dict names stay those of the plain network
+        self._forward_fn = {"net": torch.compile(self.net) if compile else self.net}
         self.outputs: dict[str, list[tuple]] = {"val": [], "test": []}
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
+        """(B, 3·F_in, H, W) → (B, F_out, H, W) logits."""
+        if self.hparams.channels_last:
+            x = x.contiguous(memory_format=torch.channels_last)
+        return self._forward_fn["net"](x)
 
     def training_step(self, batch, batch_idx):
         x, y, _ = batch

@@ -141,3 +141,53 @@ def test_targets_disks_and_soft_maps():
     assert disk[0].sum() == 21 and disk[1].sum() == 0           # WASB's 21-pixel disk
     soft = soft_heatmaps(centres[:1], (20, 30), 2.5)[0]
     assert soft[8, 10] == 1.0 and 0 < soft[soft > 0].min() < 1.0 and soft.sum() < disk[0].sum() + 1
+
+
+def test_compare_puts_several_models_in_one_table(tiny, tmp_path):
+    from inference.models.checkpoint import save_wasb_checkpoint
+    from inference.models.registry import build_model
+    from training.detection import compare
+
+    ckpts = {}
+    for name in ("wasb", "monotrack"):
+        torch.manual_seed(0)
+        ckpts[f"{name}_padel"] = save_wasb_checkpoint(build_model(name), tmp_path / f"{name}.pth.tar")
+    out = tmp_path / "table.md"
+    args = [f"{tiny}/synth_padel", *(f"{k}={v}" for k, v in ckpts.items()), "--set", "data.net_size=[64,112]",
+            "--set", f"data.cache_dir={tiny}/.cache", "--out", str(out)]
+    assert compare.main(args) == 0
+    text = out.read_text()
+    assert "python -m training.detection.compare" in text
+    assert text.count("τ = ") == 2  # τ = 4 px original and τ = 10 px at 1280×720
+    for row in ("wasb + tracker", "wasb + max-score", "monotrack + tracker", "monotrack + max-score"):
+        assert text.count(f"| {row} |") == 2
+    with pytest.raises(SystemExit, match="unknown experiment 'yolo_padel'"):
+        compare.main([f"{tiny}/synth_padel", f"yolo_padel={ckpts['wasb_padel']}"])
+    with pytest.raises(SystemExit, match="checkpoint .*missing.pth not found"):
+        compare.main([f"{tiny}/synth_padel", f"wasb_padel={tmp_path / 'missing.pth'}"])
+
+
+def test_channels_last_and_compile_keep_outputs_and_state_dict_names():
+    from functools import partial
+
+    from inference.models.registry import build_model
+    from training.detection.losses import HeatmapLoss
+    from training.detection.module import BallDetector
+
+    torch.manual_seed(0)
+    net = build_model("wasb").eval()
+    plain_names = list(net.state_dict())
+    x = torch.randn(1, 9, 64, 96)
+    with torch.no_grad():
+        expected = net(x)
+    make = partial(BallDetector, loss=HeatmapLoss("wbce"), optimizer=partial(torch.optim.Adam, lr=1e-3))
+    fast = make(net=net, channels_last=True).eval()
+    with torch.no_grad():
+        got = fast(x)
+    assert torch.allclose(got, expected, atol=1e-4)
+    convs = [p for p in fast.net.parameters() if p.ndim == 4]
+    assert all(p.is_contiguous(memory_format=torch.channels_last) for p in convs)
+    assert any(not p.is_contiguous() for p in convs)  # really NHWC, not only 1×1 kernels
+    assert [k.removeprefix("net.") for k in fast.state_dict() if k.startswith("net.")] == plain_names
+    compiled = make(net=build_model("wasb"), compile=True)
+    assert [k.removeprefix("net.") for k in compiled.state_dict() if k.startswith("net.")] == plain_names
