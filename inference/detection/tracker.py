@@ -133,6 +133,9 @@ class TrackerConfig:
     backward_tail_gap_s: float = 0.14    # ... but not a track's first detections cut off by a longer gap
     fill_max_gap_s: float = 0.2          # fill a gap between two detections at most this long ...
     fill_radius_px: float = 20.0         # ... with the clean candidate nearest the interpolated path
+    claim_min_score: float = float("inf")  # frames still without a detection take their best unflagged
+    #                                        candidate scoring at least this (inf: never; F1 charges a
+    #                                        miss like a wrong answer, so answering often pays)
     history: int = 64                    # detections kept per track (back-fill, stillness test)
     reference_height: float | None = 720.0  # pixel knobs are for this frame height (None: never scale)
 
@@ -629,7 +632,8 @@ def track_candidates(candidates: Sequence[FrameCandidates], fps: float,
     2. ``backward_pass``: the same tracker over the reversed clip; frames that only it detected (mostly
        the frames before a forward birth, and after a forward track ended) are taken from it.
     3. ``fill_max_gap_s``: :func:`fill_gaps` between detections with clean candidates near the path.
-    4. ``drop_trailing_coast``: :func:`drop_unclosed_coasts`.
+    4. ``claim_min_score``: :func:`claim_free_frames`, the best unflagged candidate where still none.
+    5. ``drop_trailing_coast``: :func:`drop_unclosed_coasts`.
 
     Args:
         candidates: ``T`` :class:`FrameCandidates` (or ``(xy, score[, area])`` tuples).
@@ -648,6 +652,8 @@ def track_candidates(candidates: Sequence[FrameCandidates], fps: float,
         flagged = [f | b for f, b in zip(flagged, back_flagged[::-1])]
     if cfg.fill_max_gap_s > 0:
         fill_gaps(out, cands, flagged, cfg.frames(cfg.fill_max_gap_s, fps), cfg.fill_radius_px)
+    if np.isfinite(cfg.claim_min_score):
+        claim_free_frames(out, cands, flagged, cfg.claim_min_score)
     if cfg.drop_trailing_coast:
         drop_unclosed_coasts(out)
     return out
@@ -725,6 +731,29 @@ def fill_gaps(result: TrackResult, candidates: Sequence[FrameCandidates], flagge
             j = int(np.argmin(d))
             if d[j] <= radius:
                 result.set(t, TrackState.DETECTED, cand.xy[j], float(cand.score[j]), int(result.track_id[a]))
+
+
+def claim_free_frames(result: TrackResult, candidates: Sequence[FrameCandidates],
+                      flagged: Sequence[np.ndarray], min_score: float) -> None:
+    """In place: every frame without a detection takes its highest-scoring candidate that no pass
+    flagged (static or a reflection) and that scores at least ``min_score`` — max-score's answer with
+    the tracker's vetoes — as a detection of its own (track id -1). A coasting track's frames prefer the
+    candidate nearest the coasted position among those scoring at least half the best."""
+    for t in np.flatnonzero(result.state != TrackState.DETECTED):
+        cand = candidates[t]
+        if not cand.count:
+            continue
+        ok = ~np.asarray(flagged[t], bool) if len(flagged[t]) == cand.count else np.ones(cand.count, bool)
+        ok &= cand.score >= min_score
+        if not ok.any():
+            continue
+        score = np.where(ok, cand.score, -np.inf)
+        j = int(np.argmax(score))
+        if result.state[t] == TrackState.COASTED:
+            near = ok & (cand.score >= 0.5 * score[j])
+            d = np.where(near, np.linalg.norm(cand.xy - result.xy[t], axis=1), np.inf)
+            j = int(np.argmin(d))
+        result.set(t, TrackState.DETECTED, cand.xy[j], float(cand.score[j]), -1)
 
 
 def drop_unclosed_coasts(result: TrackResult) -> None:

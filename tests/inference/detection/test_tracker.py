@@ -30,6 +30,7 @@ from inference.detection.tracker import (
     ConstantAcceleration,
     StaticMemory,
     TrackResult,
+    claim_free_frames,
     drop_unclosed_coasts,
     mirror_pairs,
     reflection_flags,
@@ -334,3 +335,35 @@ def test_config_scales_with_the_frame_height():
     assert cfg.static_radius_px == pytest.approx(4.5) and cfg.max_speed_px_s == pytest.approx(6000)
     assert cfg.gate_chi2 == TrackerConfig().gate_chi2 and cfg.for_image_height(1080) is cfg
     assert TrackerConfig(reference_height=None).for_image_height(1080).static_radius_px == 3.0
+
+
+def test_claim_free_frames_answers_with_unflagged_candidates_only():
+    from dataclasses import replace
+
+    # a ball jumping about at random rarely confirms a track: the tracker alone reports little
+    rng = np.random.default_rng(3)
+    T = 60
+    ball = rng.uniform([100, 100], [1100, 600], (T, 2))
+    cands = [FrameCandidates.from_arrays(np.stack([ball[t], STATIC_XY]), np.array([4.0, 9.0])) for t in range(T)]
+    plain = track_candidates(cands, FPS, image_size=(W, H))
+    assert (plain.state == TrackState.DETECTED).mean() < 0.25
+    claimed = track_candidates(cands, FPS, replace(TrackerConfig(), claim_min_score=1.0), image_size=(W, H))
+    det = claimed.state == TrackState.DETECTED
+    # the still ball out-scores the moving one, but once the static memory knows it, it is vetoed
+    settled = np.arange(T) > FPS  # static_min_s = 0.5 s plus margin
+    assert det[settled].all()
+    assert np.allclose(claimed.xy[settled], ball[settled])
+    # a minimum score above every candidate's claims nothing
+    strict = track_candidates(cands, FPS, replace(TrackerConfig(), claim_min_score=10.0), image_size=(W, H))
+    assert np.array_equal(strict.state, plain.state)
+
+
+def test_claim_free_frames_prefers_the_candidate_near_a_coast():
+    result = TrackResult.empty(2)
+    result.set(0, TrackState.COASTED, np.array([100.0, 100.0]), 0.5, 0)
+    cand = FrameCandidates.from_arrays(np.array([[500.0, 500.0], [104.0, 101.0], [300.0, 90.0]]),
+                                       np.array([5.0, 3.0, 1.0]))
+    claim_free_frames(result, [cand, cand], [np.zeros(3, bool), np.array([True, False, False])], 0.0)
+    assert np.allclose(result.xy[0], [104.0, 101.0])     # near the coast, and ≥ half the best score
+    assert np.allclose(result.xy[1], [104.0, 101.0])     # the best unflagged
+    assert (result.state == TrackState.DETECTED).all() and (result.track_id == -1).all()
