@@ -722,7 +722,7 @@ def fill_gaps(result: TrackResult, candidates: Sequence[FrameCandidates], flagge
             continue
         for t in range(a + 1, b):
             cand = candidates[t]
-            ok = ~np.asarray(flagged[t], bool) if len(flagged[t]) == cand.count else np.ones(cand.count, bool)
+            ok = _unflagged(cand, flagged[t])
             if not ok.any():
                 continue
             w = (t - a) / (b - a)
@@ -731,6 +731,11 @@ def fill_gaps(result: TrackResult, candidates: Sequence[FrameCandidates], flagge
             j = int(np.argmin(d))
             if d[j] <= radius:
                 result.set(t, TrackState.DETECTED, cand.xy[j], float(cand.score[j]), int(result.track_id[a]))
+
+
+def _unflagged(cand: FrameCandidates, flags: np.ndarray) -> np.ndarray:
+    """``(K,) bool``: candidates no pass flagged (all of them when the flags do not match the frame)."""
+    return ~np.asarray(flags, bool) if len(flags) == cand.count else np.ones(cand.count, bool)
 
 
 def claim_free_frames(result: TrackResult, candidates: Sequence[FrameCandidates],
@@ -743,7 +748,7 @@ def claim_free_frames(result: TrackResult, candidates: Sequence[FrameCandidates]
         cand = candidates[t]
         if not cand.count:
             continue
-        ok = ~np.asarray(flagged[t], bool) if len(flagged[t]) == cand.count else np.ones(cand.count, bool)
+        ok = _unflagged(cand, flagged[t])
         ok &= cand.score >= min_score
         if not ok.any():
             continue

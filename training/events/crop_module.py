@@ -22,6 +22,8 @@ from inference.events.crop import CropConfig, CropHitNet
 from inference.events.detector import load_model_file
 from inference.events.features import FeatureConfig
 
+from .module import macro_event_f1
+
 
 @dataclass(frozen=True)
 class CropAugment:
@@ -162,13 +164,8 @@ class CropHitNetModule(L.LightningModule):
             return
         pred, y = (torch.cat(t) for t in zip(*self._val))
         self._val = []
-        f1s = []
-        for c in range(1, self.class_set.n):
-            if (y == c).any():
-                tp = ((pred == c) & (y == c)).sum().item()
-                f1s.append(2 * tp / max((pred == c).sum().item() + (y == c).sum().item(), 1))
         self.log("val/acc", (pred == y).float().mean().item())
-        self.log("val/f1", float(sum(f1s) / max(len(f1s), 1)), prog_bar=True)
+        self.log("val/f1", macro_event_f1(pred, y, self.class_set.n), prog_bar=True)
 
     def configure_optimizers(self):
         head = list(self.net.head.parameters())

@@ -25,6 +25,7 @@ from inference.events.detector import EventDetector, load_model_file
 from inference.events.metrics import format_event_table
 
 from .crop_data import CropEventDataModule
+from .run import test_and_export
 from .evaluate import counts_for, fit_temperature, score_all, tune_decoder
 from .simulate import SimClip, perturb
 
@@ -99,18 +100,8 @@ def train_crop_events(cfg: DictConfig) -> dict[str, float]:
                               "data": {"root": str(dm.root), "counts": dm.counts},
                               "init_from": module.hparams.init_from})
     metrics["events/val_f1"] = det.meta["val_f1"] = tune_crop(det, dm, passes=1 if dev else 2)
-    if cfg.get("test", True):
-        scores, table = crop_tables(det, dm, f"HitNet+crops {module.hparams.layers}×{module.hparams.hidden}")
-        metrics.update(scores)
-        det.meta["test"] = {k: float(v) for k, v in scores.items()}
-        print("\n" + table)
-    out = Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar"
-    det.save(out)
-    log.info("exported %s", out)
-    if cfg.get("export_path"):
-        det.save(cfg.export_path)
-        log.info("exported %s", cfg.export_path)
-    return metrics
+    name = f"HitNet+crops {module.hparams.layers}×{module.hparams.hidden}"
+    return test_and_export(cfg, det, dm, metrics, lambda: crop_tables(det, dm, name))
 
 
 def evaluate_crop_events(cfg: DictConfig) -> dict[str, float]:

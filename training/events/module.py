@@ -13,6 +13,19 @@ from inference.events.network import HitNet
 from .data import AugmentConfig, augment_batch
 
 
+
+def macro_event_f1(pred: torch.Tensor, y: torch.Tensor, n_classes: int) -> float:
+    """Mean per-class F1 over the event classes 1..n-1 present in ``y`` (class 0, none, left out).
+
+    pred, y: ``(N,)`` class indices.
+    """
+    f1s = []
+    for c in range(1, n_classes):
+        if (y == c).any():
+            tp = ((pred == c) & (y == c)).sum().item()
+            f1s.append(2 * tp / max((pred == c).sum().item() + (y == c).sum().item(), 1))
+    return float(sum(f1s) / max(len(f1s), 1))
+
 class HitNetModule(L.LightningModule):
     """Args:
         class_set: name or dict; features: :class:`FeatureConfig` fields (must match the data's).
@@ -61,14 +74,8 @@ class HitNetModule(L.LightningModule):
             return
         pred, y = (torch.cat(t) for t in zip(*self._val))
         self._val = []
-        f1s = []
-        for c in range(1, self.class_set.n):
-            tp = ((pred == c) & (y == c)).sum().item()
-            n = (pred == c).sum().item() + (y == c).sum().item()
-            if (y == c).any():
-                f1s.append(2 * tp / max(n, 1))
         self.log(f"{stage}/acc", (pred == y).float().mean().item())
-        self.log(f"{stage}/f1", float(sum(f1s) / max(len(f1s), 1)), prog_bar=True)
+        self.log(f"{stage}/f1", macro_event_f1(pred, y, self.class_set.n), prog_bar=True)
 
     def on_validation_epoch_end(self) -> None:
         self._eval_end("val")

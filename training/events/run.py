@@ -103,18 +103,23 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
                                                  "data": {"source": dm.source, "root": dm.root,
                                                           "counts": dm.counts, "seed": dm.seed}})
     metrics["events/val_f1"] = det.meta["val_f1"] = tune(det, dm, passes=1 if dev else 2)
-    out = Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar"
+    name = f"HitNet {module.hparams.layers}×{module.hparams.hidden}{' bi' if module.hparams.bidirectional else ''}"
+    return test_and_export(cfg, det, dm, metrics, lambda: event_tables(det, dm, name))
+
+
+def test_and_export(cfg: DictConfig, det: EventDetector, dm, metrics: dict[str, float], tables) -> dict[str, float]:
+    """After training: unless ``test=false``, score the test split (``tables() → (scores, markdown)``),
+    print the table and keep the scores in the model file's meta; then save the model file to the run
+    folder (and ``export_path``). Returns ``metrics`` with the test scores added."""
     if cfg.get("test", True):
-        scores, table = event_tables(det, dm, f"HitNet {module.hparams.layers}×{module.hparams.hidden}"
-                                     f"{' bi' if module.hparams.bidirectional else ''}")
+        scores, table = tables()
         metrics.update(scores)
         det.meta["test"] = {k: float(v) for k, v in scores.items()}
         print("\n" + table)
-    det.save(out)
-    log.info("exported %s", out)
-    if cfg.get("export_path"):
-        det.save(cfg.export_path)
-        log.info("exported %s", cfg.export_path)
+    for out in (Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar", cfg.get("export_path")):
+        if out:
+            det.save(out)
+            log.info("exported %s", out)
     return metrics
 
 
