@@ -1,6 +1,6 @@
 """Courts as data: a typed :class:`Court` loaded from a YAML file under ``conf/court/``.
 
-The court frame (shared/docs/formats.md): right-handed, metres, z up, origin at the near-left ground
+The court frame (docs/formats.md): right-handed, metres, z up, origin at the near-left ground
 corner as seen from the main camera, x along the near baseline, y away from the camera.
 
 Example:

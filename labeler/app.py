@@ -70,7 +70,10 @@ class ClientView:
         self.target, self.shown, self.direction = 0, -1, 1
         self.playing, self.speed = False, 1.0
         self.fit_distance: float | None = None
+        self.reported_camera: np.ndarray | None = None  # the browser's last reported camera position (3,)
         self._aspect = 0.0
+        self._fit_lock = threading.RLock()
+        self._fit_pending = True
         self._overlay_dirty = self._gui_dirty = True
         self._closed = False
         self._cond = threading.Condition()
@@ -187,13 +190,41 @@ class ClientView:
 
     # ---------------------------------------------------------------------------------- camera
     def fit(self, aspect: float | None = None) -> None:
-        self.fit_distance = fit_camera(self.client, self.plane, aspect=aspect)
-        self._aspect = float(aspect if aspect is not None else (self.client.camera.aspect or 0.0))
+        """Fit the browser's camera to the frame (for the canvas aspect, default: the last one reported).
+
+        Serialised: the first fit (at connection) and a refit after a canvas resize may run in two
+        threads, and the browser must end at the pose whose distance ``fit_distance`` says.
+        """
+        with self._fit_lock:
+            if aspect is None:
+                aspect = float(self.client.camera.aspect or 0.0)
+            self.fit_distance = fit_camera(self.client, self.plane, aspect=aspect)
+            self._aspect = float(aspect)
+            self._fit_pending = True
+
+    @property
+    def camera_fitted(self) -> bool:
+        """True once the browser has reported its camera at the last fitted pose."""
+        return not self._fit_pending
 
     def _on_camera(self, camera) -> None:
-        aspect = float(camera.aspect or 0.0)
-        if aspect > 0 and abs(aspect - self._aspect) > 1e-3:  # canvas resized (or first real size): refit
-            self.fit(aspect)
+        """The browser reported its camera (viser calls this for client messages only).
+
+        Refits when the canvas changed shape. Until the browser reports the fitted pose, a report of another
+        pose is answered by the fit again: on a fresh connection the browser may apply the fits it was sent
+        out of order (it resets to its initial camera as it starts), and the annotator has not moved the view yet.
+        """
+        self.reported_camera = np.array(camera.position, float)
+        with self._fit_lock:
+            aspect = float(camera.aspect or 0.0)
+            d = self.fit_distance or 0.0
+            at_fit = d > 0 and bool(np.allclose(self.reported_camera, (0.0, 0.0, -d), atol=1e-3 * d))
+            if aspect > 0 and abs(aspect - self._aspect) > 1e-3:  # canvas resized (or first real size): refit
+                self.fit(aspect)
+            elif self._fit_pending and not at_fit:
+                self.fit(self._aspect)
+            elif at_fit:
+                self._fit_pending = False
 
     # ---------------------------------------------------------------------------------- edits
     def _notice(self, text: str) -> None:

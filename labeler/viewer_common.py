@@ -3,7 +3,8 @@
 The frame is an image plane in the scene's local XY at z = 0 (viser's ``add_image``): image u runs along
 +x and v along +y (downwards), centred on the origin. A camera on -z looking at +z with ``up = (0, -1, 0)``
 shows it upright. Clicks on the plane arrive as rays; :meth:`ImagePlane.ray_to_pixel` intersects them with
-z = 0 (pixel-accurate, docs/viser.md §1).
+z = 0, which is pixel-accurate at any zoom (a scene-level click, by contrast, carries viser's half-CSS-pixel
+pointer offset).
 """
 from __future__ import annotations
 

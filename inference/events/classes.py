@@ -1,5 +1,5 @@
 """Class sets of the hit-event models: the coarse classes a model predicts and the mapping from the
-fine-grained labels of ``events.csv`` (shared/docs/formats.md) onto them.
+fine-grained labels of ``events.csv`` (docs/formats.md) onto them.
 
 A class set is data (``conf/events/<name>.yaml``) and travels inside every exported model, so the
 runtime never needs the config folder.

@@ -54,7 +54,7 @@ class EventResult:
     """Output of :meth:`EventDetector.predict`.
 
     Attributes:
-        events: fine-grained events (formats.md), ready for ``write_events_csv``.
+        events: fine-grained events (docs/formats.md), ready for ``write_events_csv``.
         probs: ``(T, C)`` per-frame class probabilities at the clip's frame rate.
         classes: the C class names (``probs`` columns).
         coarse: ``(N,)`` class name of each event (before resolving to a fine label).

@@ -1,4 +1,4 @@
-"""Event-set metrics (shared/docs/anchors.md): an event matches when its class agrees and its frame
+"""Event-set metrics (docs/anchors.md): an event matches when its class agrees and its frame
 is within a tolerance; ``acc = |G∩Ĝ| / |G∪Ĝ|``, ``recall = |G∩Ĝ| / |G|``, ``prec = |G∩Ĝ| / |Ĝ|``, F1.
 
 The tolerance is ``tol_frames_at_50`` frames at 50 fps scaled with the frame rate and rounded to the

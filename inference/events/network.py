@@ -1,5 +1,5 @@
 """HitNet: a GRU stack over a window of per-frame features, global max pool over time, a linear layer
-and a softmax with a calibrated temperature (MonoTrack's hit detector, shared/docs/models.md §4)."""
+and a softmax with a calibrated temperature (MonoTrack's hit detector; docs/models.md, "HitNet")."""
 from __future__ import annotations
 
 import torch

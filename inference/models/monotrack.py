@@ -1,8 +1,9 @@
 """MonoTrack's shuttle detector as re-implemented by WASB-SBDT (``src/models/monotrack.py`` with
 ``halve_channel: True``), weight-compatible with its public ``monotrack_*_best.pth.tar`` checkpoints.
 
-This is *not* the layout of MonoTrack's released Keras model (see docs/models.md §3). A residual U-Net;
-convolutions are 3×3 with bias, then BN, then ReLU. Channels @ resolution for a 288×512 input::
+This is *not* the layout of MonoTrack's released Keras model (see docs/models.md, "Architectures"). A
+residual U-Net; convolutions are 3×3 with bias, then BN, then ReLU. Channels @ resolution for a 288×512
+input::
 
     inc     Neck: conv1 9 -> 32, conv2 32 -> 32, out = conv1 + conv2    @ 288×512
     down1   pool, ResBlock(2 convs) -> 64      @ 144×256

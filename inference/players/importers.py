@@ -2,8 +2,8 @@
 
 :func:`load_predictions` reads MMPose/RTMPose JSON, COCO keypoint JSON, OpenPose JSON, Ultralytics
 ``Results.summary()`` JSON or a flat CSV and returns a :class:`PoseSequence` in COCO-17 order, in pixels
-of the original frame (layouts: ``docs/pose.md``). Every format goes through one converter
-(:func:`_person`) and one validation helper (:func:`_numbers`), so every problem is a
+of the original frame (layouts: ``docs/formats.md``, "Outside formats"). Every format goes through one
+converter (:func:`_person`) and one validation helper (:func:`_numbers`), so every problem is a
 :class:`FormatError` naming the file, the entry (frame and instance, or the CSV line) and the fix.
 
 Conventions shared by all formats:

@@ -1,4 +1,4 @@
-"""Everything the review shows, read once from a clip folder (formats.md), UI-free.
+"""Everything the review shows, read once from a clip folder (docs/formats.md), UI-free.
 
 Example:
     >>> data = ReviewData.load("runs/demo/padel_sample")

@@ -6,7 +6,7 @@ A *shot* runs from one racket hit (``player_near`` / ``player_far`` in events.cs
 end of the clip). Its surface contacts (floor, glass, mesh, net) come from events.csv, placed in 3D by
 segments.json's fitted contact points (else ball_3d.csv at that frame).
 
-Rules applied (:func:`judge_shot`), with the court frame of shared/docs/formats.md:
+Rules applied (:func:`judge_shot`), with the court frame of docs/formats.md:
 
 - **Target.** A shot must first bounce on the floor in the opponent's half, inside the lines. The lines
   belong to the court: the court YAML's coordinates are the lines' outer edges, and a bounce whose ball

@@ -1,12 +1,10 @@
 """End to end in headless Chromium: click the ball, press event keys, place court points, reload, two tabs."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 import yaml
-from conftest import WEBGL_CANVAS, dismiss_toasts, wait_until
+from conftest import WEBGL_CANVAS, wait_for_canvas, wait_until
 from label_helpers import SAMPLE, copy_sample
 
 from inference.camera import Camera
@@ -35,23 +33,33 @@ def ready_view(app, page, known: set[int] = frozenset()):
     box = page.locator(WEBGL_CANVAS).bounding_box()
     wait_until(lambda: abs(view._aspect - box["width"] / box["height"]) < 1e-3, what="the camera fit to the canvas")
     wait_until(lambda: view.shown >= 0, what="the first frame")
-    time.sleep(0.8)  # the client applies the camera pose
-    dismiss_toasts(page, wait_s=0.3)
+    wait_until(lambda: view.camera_fitted, what="the browser to report the fitted camera "
+               f"({view.reported_camera}, {view.fit_distance}, {view._aspect})")
     return view
+
+
+def point_field(page):
+    """The court tab's "point" dropdown in the page."""
+    return page.get_by_role("combobox", name="point")
+
+
+def select_point(page, view, name: str) -> None:
+    """Choose the court point ``name`` in the page's dropdown, as an annotator does."""
+    point_field(page).click()
+    page.get_by_role("option", name=name, exact=True).click()
+    wait_until(lambda: view.court_panel.point.value == name, what=f"{name} selected")
 
 
 def click_pixel(page, view, xy_px) -> None:
     box = page.locator(WEBGL_CANVAS).bounding_box()
     sx, sy = screen_of_pixel(np.asarray(xy_px, float)[None], view.plane, box["width"], box["height"],
                              view.fit_distance)[0]
-    page.mouse.click(box["x"] + sx, box["y"] + sy)
-    time.sleep(0.06)  # viser throttles clicks to 20 ms, latest wins
+    page.mouse.click(box["x"] + sx, box["y"] + sy)  # every caller then waits for the click's effect
 
 
 def press(page, key: str, times: int = 1) -> None:
     for _ in range(times):
         page.keyboard.press(key)
-        time.sleep(0.03)
 
 
 def test_label_ball_event_court_points_and_reload(app_and_clip, viser_page):
@@ -78,25 +86,29 @@ def test_label_ball_event_court_points_and_reload(app_and_clip, viser_page):
 
     press(page, "m", 2)  # ball → stationary → court
     wait_until(lambda: view.mode == "court", what="court mode")
+    page.get_by_role("tab", name="Court").click()
     gt_points = Clip(SAMPLE).read_court_points().as_dict()
     for name in COURT_POINTS:
-        view.court_panel.point.value = name
+        select_point(page, view, name)
         n_before = len(view.session.points)
         click_pixel(page, view, np.array(gt_points[name]) * size)
         wait_until(lambda: len(view.session.points) == n_before + 1, what=f"court point {name}")
+    wait_until(lambda: clip.court_points_path.exists() and set(clip.read_court_points().names) == set(COURT_POINTS),
+               what="court_points.csv with every clicked point")  # saved after the session counts them
     points = clip.read_court_points()
-    assert set(points.names) == set(COURT_POINTS)
     for name, xy in points.as_dict().items():
         assert np.abs((np.array(xy) - gt_points[name]) * size).max() < 1.0, name
-    wait_until(lambda: clip.camera_path.exists(), what="camera.yaml")
+    # camera.yaml is written from 6 points on, then again with the 7th
+    wait_until(lambda: clip.camera_path.exists()
+               and set(yaml.safe_load(clip.camera_path.read_text())["points_used"]) == set(COURT_POINTS),
+               what="camera.yaml calibrated from all 7 points")
     cam = Camera.load(clip.camera_path)
     assert cam.rms_px is not None and cam.rms_px < 2.0
     assert np.linalg.norm(cam.centre - Camera.load(clip_dir / "gt" / "camera.yaml").centre) < 0.5
-    assert set(yaml.safe_load(clip.camera_path.read_text())["points_used"]) == set(COURT_POINTS)
 
     old = set(app.views)
     page.reload(wait_until="load")
-    page.wait_for_selector(WEBGL_CANVAS, timeout=30_000)
+    wait_for_canvas(page)
     view2 = ready_view(app, page, known=old)
     assert view2 is not view and view2.session.summary()["court_points"] == 7
     status = "labelled 1 (0.4 %) · events 1 · still balls 0 · court points 7"

@@ -1,11 +1,12 @@
 """Overlay geometry, the frame cache (JPEG transport, prefetch) and the model-assistance helpers of the labeler."""
 from __future__ import annotations
 
-import time
+
 
 import cv2
 import numpy as np
 import pytest
+from conftest import wait_until
 from label_helpers import copy_sample
 
 from inference.camera import Camera
@@ -69,10 +70,8 @@ def test_frame_cache_serves_jpegs_of_the_right_frame_and_prefetches(tmp_path):
         assert img.shape == ref.shape and np.abs(img.astype(int) - ref).mean() < 4  # JPEG q85
         cache.prefetch(7, 1)
         wanted = [*range(8, 13), 6, 5]  # ahead first, then behind
-        deadline = time.monotonic() + 20
-        while not all(cache.cached(i) for i in wanted) and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert all(cache.cached(i) for i in wanted) and not cache.cached(14)
+        wait_until(lambda: all(cache.cached(i) for i in wanted), what="the prefetched frames")
+        assert not cache.cached(14)
         with pytest.raises(IndexError, match="outside the clip"):
             cache.get(240)
     finally:

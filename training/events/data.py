@@ -146,7 +146,7 @@ class BalancedSampler(Sampler):
 # ------------------------------------------------------------------------------------- augmentation
 @dataclass(frozen=True)
 class AugmentConfig:
-    """MonoTrack's augmentations on batches of windows (shared/docs/models.md §4).
+    """MonoTrack's augmentations on batches of windows (docs/models.md, "HitNet").
 
     Each window gets one of {identity, drop a 4-frame block, corrupt a 4-frame block, drop 5 % of
     frames, corrupt 5 %, rotate ±15° + shear ≤ 0.1, and combinations} with ``weights``; separately a

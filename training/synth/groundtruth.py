@@ -1,4 +1,4 @@
-"""Ground-truth tables of a simulated rally, in the clip-folder format (shared/docs/formats.md).
+"""Ground-truth tables of a simulated rally, in the clip-folder format (docs/formats.md).
 
 Pure functions from a :class:`Rally` and a camera to the typed tables of :mod:`inference.clipio`;
 the renderer supplies what only it knows (the ball's 2D visibility, players' 2D keypoints).

@@ -899,8 +899,9 @@ def _points_box(pts: np.ndarray, pad: float, size) -> tuple[int, int, int, int] 
 # ======================================================================================================
 @dataclass
 class BallInfo:
-    """The ball at the frame time: pixel centre, projected radius, formats.md visibility (0 outside the
-    image, 1 visible, 2 hard to see, 3 occluded by a player), the blur streak length and the occluder."""
+    """The ball at the frame time: pixel centre, projected radius, ball.csv visibility (docs/formats.md:
+    0 outside the image, 1 visible, 2 hard to see, 3 occluded by a player), the blur streak length and the
+    occluder."""
 
     x: float
     y: float

@@ -1,7 +1,7 @@
 """Data passed between the stages of the synthetic rally generator.
 
 simulate (physics + rally planner) → :class:`Rally` → articulate players → render frames → write clip.
-All positions are in the court frame (metres, z up; shared/docs/formats.md); times in seconds from the
+All positions are in the court frame (metres, z up; docs/formats.md); times in seconds from the
 clip's first frame; frame ``i`` is exposed around ``t = i / fps``.
 """
 from __future__ import annotations

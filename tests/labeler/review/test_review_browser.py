@@ -7,12 +7,11 @@ README screenshot.
 from __future__ import annotations
 
 import os
-import time
 
 import cv2
 import numpy as np
 import pytest
-from conftest import WEBGL_CANVAS, dismiss_toasts, wait_until
+from conftest import WEBGL_CANVAS, wait_until
 from review_fixtures import reconstructed_clip  # noqa: F401  (fixture)
 
 from labeler.review.app import ReviewApp
@@ -45,42 +44,50 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
         session = next(iter(app.sessions.values()))
         session.playback.seek(40)  # the serve in flight, over the court
         session.render()
-        dismiss_toasts(page, wait_s=2.0)
         canvas = page.locator(WEBGL_CANVAS)
+        shots: list[np.ndarray] = []
 
-        first = rgb_of(canvas.screenshot())
-        assert floor_mask(first).mean() > 0.15, "the court floor is not visible"
+        def court_and_ball_drawn() -> bool:
+            shots.append(rgb_of(canvas.screenshot()))
+            return floor_mask(shots[-1]).mean() > 0.15 and int(ball_mask(shots[-1]).sum()) >= 15
+
+        wait_until(court_and_ball_drawn, what="the court floor and the ball to be drawn")
+        first = shots[-1]
         ball0 = np.argwhere(ball_mask(first))
-        assert len(ball0) >= 15, "the ball is not visible"
 
         # press play in the GUI, as a user would
         page.get_by_role("checkbox", name="play").click()
-        wait_until(lambda: session.playback.playing, timeout_s=10, what="play to reach the server")
+        wait_until(lambda: session.playback.playing, what="play to reach the server")
         start = session.playback.frame
-        wait_until(lambda: session.playback.frame >= start + 8, timeout_s=15, what="playback to advance")
+        wait_until(lambda: session.playback.frame >= start + 8, what="playback to advance")
         page.get_by_role("checkbox", name="play").click()
-        wait_until(lambda: not session.playback.playing, timeout_s=10, what="pause")
+        wait_until(lambda: not session.playback.playing, what="pause")
         # on a busy machine playback may run on while the pause click is delivered (past the reconstructed
         # frames, where no ball is drawn): look at a fixed frame 8 after the start for the on-screen check
         session.playback.seek(start + 8)
         session.render()
 
         def moved() -> bool:
-            dismiss_toasts(page, wait_s=0.3)
             img = rgb_of(canvas.screenshot())
             pts = np.argwhere(ball_mask(img))
             return len(pts) >= 12 and np.linalg.norm(pts.mean(0) - ball0.mean(0)) > 10
 
-        wait_until(moved, timeout_s=20, what="the ball to move on screen")
+        wait_until(moved, what="the ball to move on screen")
         out = os.environ.get("REVIEW_SCREENSHOT")
         if out:
             page.set_viewport_size({"width": 1280, "height": 720})
             page.mouse.move(5, 700)  # no tooltip
             session.playback.seek(45)
             session.render()
-            dismiss_toasts(page, wait_s=0.5)
-            time.sleep(3.0)  # the toast fades out, the frame renders
-            png = page.screenshot()
+            pngs = [page.screenshot()]
+
+            def settled() -> bool:  # two screenshots in a row alike: the frame is rendered
+                pngs.append(page.screenshot())
+                a, b = rgb_of(pngs[-2]), rgb_of(pngs[-1])
+                return np.abs(a - b).mean() < 0.5 and int(ball_mask(b).sum()) >= 15
+
+            wait_until(settled, what="the screenshot to settle")
+            png = pngs[-1]
             cv2.imwrite(out, cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR),
                         [cv2.IMWRITE_PNG_COMPRESSION, 9])
     finally:

@@ -101,7 +101,8 @@ def test_eval_needs_a_checkpoint(tmp_path):
 
 
 def test_plus_experiment_spelling_from_the_command_line(tiny, tmp_path):
-    """`python train.py +experiment=wasb_padel` composes (the style.md pitfall)."""
+    """`python train.py +experiment=wasb_padel` composes (Hydra pitfall: with `experiment: null` in train.yaml's
+    defaults only `experiment=...` works and `+experiment=...` fails, and the other way round without it)."""
     import subprocess
     import sys
 
