@@ -4,7 +4,10 @@ H.264 bytes cannot be compared across machines: libx264's output depends on the 
 gets (``taskset -c 0`` changes it) and the RGB→YUV conversion on the CPU's instruction set. So the
 regenerated sample is compared on what is deterministic and on what a viewer would see:
 
-- every CSV/YAML/JSON file byte for byte;
+- every CSV/YAML/JSON file token for token, numbers within 2e-6 (relative; 1 in the 6th decimal of a
+  normalised coordinate): the text is byte-identical on machines of one CPU family, but a float printed in
+  full precision (``gt/camera.yaml``'s matrices) can change in its last digit with the BLAS kernel
+  (``OPENBLAS_CORETYPE=SandyBridge`` shows it);
 - the rendered frames (before encoding) identical when rendered twice in one process;
 - the decoded video within a tolerance an encoder difference cannot break but a real change does
   (per-frame PSNR ≥ 40 dB against the committed video; between CPUs and thread counts it is ≥ 47 dB);
@@ -13,6 +16,7 @@ regenerated sample is compared on what is deterministic and on what a viewer wou
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -27,6 +31,22 @@ from training.synth.sample import SAMPLE_CLIPS, make_sample
 SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
 VIDEO_SUFFIXES = {".mp4", ".mov", ".mkv", ".avi", ".webm"}
 MIN_PSNR_DB = 40.0
+NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+REL_TOL = 2e-6
+
+
+def text_data_differences(a: str, b: str) -> list[str]:
+    """Where two text files differ beyond the float tolerance: other text must match exactly (empty = same)."""
+    if a == b:
+        return []
+    if NUMBER.split(a) != NUMBER.split(b):
+        return ["the text around the numbers differs"]
+    out = []
+    for x, y in zip(NUMBER.findall(a), NUMBER.findall(b)):
+        fx, fy = float(x), float(y)
+        if abs(fx - fy) > REL_TOL * max(1.0, abs(fx), abs(fy)):
+            out.append(f"{x} != {y}")
+    return out
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -85,7 +105,7 @@ def regenerated(tmp_path_factory):
 
 
 @pytest.mark.parametrize("clip", SAMPLE_CLIPS, ids=lambda c: c.name)
-def test_sample_files_regenerate_byte_for_byte_except_the_video(regenerated, clip):
+def test_sample_data_files_regenerate(regenerated, clip):
     out, _ = regenerated
     committed = sorted(p.relative_to(SAMPLE) for p in (SAMPLE / clip.name).rglob("*") if p.is_file())
     fresh = sorted(p.relative_to(out) for p in (out / clip.name).rglob("*") if p.is_file())
@@ -93,8 +113,17 @@ def test_sample_files_regenerate_byte_for_byte_except_the_video(regenerated, cli
     data_files = [rel for rel in committed if rel.suffix not in VIDEO_SUFFIXES]
     assert {rel.name for rel in data_files} >= {"clip.yaml", "ball.csv", "events.csv", "court_points.csv"}
     for rel in data_files:
-        assert (SAMPLE / rel).read_bytes() == (out / rel).read_bytes(), rel
+        assert not text_data_differences((SAMPLE / rel).read_text(), (out / rel).read_text()), rel
     assert (SAMPLE / "manifest.yaml").read_text() == (out / "manifest.yaml").read_text()
+
+
+def test_text_comparison_tolerates_last_digits_only():
+    same = "P:\n- [1234.56789012345, -0.5]\nframe,x\n3,0.512345\n"
+    assert text_data_differences(same, same.replace("1234.56789012345", "1234.56789012346")) == []
+    assert text_data_differences(same, same.replace("0.512345", "0.512346")) == []
+    assert text_data_differences(same, same.replace("0.512345", "0.512945"))  # a ball 0.8 px off at 1280 px
+    assert text_data_differences(same, same.replace("frame,x", "frame,y"))
+    assert text_data_differences(same, same.replace("3,0.512345", "4,0.512345"))
 
 
 @pytest.mark.parametrize("clip", SAMPLE_CLIPS, ids=lambda c: c.name)
