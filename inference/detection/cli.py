@@ -14,8 +14,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "and reflection rejection). Default: WASB with the shipped padel weights.",
     )
     p.add_argument("clip", type=Path)
-    p.add_argument("--model", choices=["wasb", "tracknetv2", "monotrack"], default="wasb")
-    p.add_argument("--weights", type=Path, help="checkpoint (ours or WASB-SBDT); default: the shipped weights")
+    p.add_argument("--model", choices=["wasb", "tracknetv2", "monotrack"],
+                   help="architecture when the checkpoint does not name one (default wasb); rally3d's files name it")
+    p.add_argument("--weights", type=Path, help="checkpoint (ours or WASB-SBDT); default: the shipped weights. Its "
+                   "input normalisation, frames and size are read from the file (WASB-SBDT's files: ImageNet)")
+    p.add_argument("--trust-checkpoint", action="store_true",
+                   help="allow a checkpoint that holds pickled Python objects (unpickling runs code stored in the "
+                   "file: only for files you trust); without it such a file is refused")
     p.add_argument("--step", type=int, default=3, help="window step in frames (3: non-overlapping, 1: pooled)")
     p.add_argument("--batch-size", type=int, default=1,
                    help="windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
@@ -31,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     from .detect import BallDetectorRunner
 
     clip = Clip(args.clip)
-    runner = BallDetectorRunner.from_weights(args.model, args.weights, step=args.step, batch_size=args.batch_size)
+    runner = BallDetectorRunner.from_weights(args.model, args.weights, trust=args.trust_checkpoint,
+                                             step=args.step, batch_size=args.batch_size)
     result = runner.run(clip, progress=True)
     path = write_ball_csv(args.out or clip.ball_path, result.track)
     seen = int(np.sum(result.track.visibility == 1))

@@ -11,6 +11,7 @@ Example:
 """
 from __future__ import annotations
 
+import logging
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -20,15 +21,15 @@ import numpy as np
 import torch
 
 from inference.clipio import BallTrack, Clip, FormatError
-from inference.models.checkpoint import load_weights
+from inference.models.checkpoint import load_detector
 from inference.models.fuse import fold_batchnorm
-from inference.models.registry import build_model
 
 from .geometry import Letterbox
-from .preprocess import NORMALIZATION, normalize
+from .preprocess import normalize
 from .postprocess import FrameCandidates, PostprocessConfig, heatmaps_to_candidates, pool_candidates
 from .tracker import TrackerConfig, TrackResult, track_candidates
 
+log = logging.getLogger(__name__)
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 SHIPPED = {"wasb": WEIGHTS_DIR / "wasb_padel.pth.tar"}
 
@@ -78,15 +79,21 @@ class BallDetectorRunner:
         self.model = self.model.to(self.device, memory_format=torch.channels_last)
 
     @classmethod
-    def from_weights(cls, name: str = "wasb", weights: str | Path | None = None, **kw) -> BallDetectorRunner:
-        """Build ``name`` and load ``weights`` (default: the shipped weights of that model)."""
-        weights = weights or SHIPPED.get(name)
+    def from_weights(cls, name: str | None = "wasb", weights: str | Path | None = None, *, trust: bool = False,
+                     **kw) -> BallDetectorRunner:
+        """Build the detector of ``weights`` (default: the shipped weights of ``name``) with the input the
+        file states: architecture, frames in/out, normalisation and input size
+        (:func:`~inference.models.checkpoint.detector_input`; WASB-SBDT's ImageNet normalisation for files
+        that do not say). ``name`` is used when the file does not name its architecture; a file naming
+        another one wins. ``trust`` allows pickled objects (see ``read_checkpoint``)."""
+        weights = weights or SHIPPED.get(name or "wasb")
         if weights is None:
             raise FileNotFoundError(f"no shipped weights for {name!r}; pass the path of a checkpoint "
                                     "(weights are never downloaded)")
-        model = build_model(name)
-        load_weights(model, weights)
-        return cls(model.eval(), normalize=NORMALIZATION.get(name, "imagenet"), **kw)
+        model, spec, _ = load_detector(weights, name, trust=trust)
+        if name and spec.arch != name:
+            log.info("%s holds a %s detector (stored in the file), not %s: using %s", weights, spec.arch, name, spec.arch)
+        return cls(model, frames_in=spec.frames_in, net_size=spec.input_size, normalize=spec.normalize, **kw)
 
     def _tensor(self, frames: list[np.ndarray]) -> torch.Tensor:
         return torch.from_numpy(normalize(np.stack(frames), self.normalize))

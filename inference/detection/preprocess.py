@@ -5,8 +5,6 @@ import numpy as np
 
 IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
 IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
-#: Input normalisation each published model was trained with (WASB: ImageNet; TrackNetV2, MonoTrack: /255).
-NORMALIZATION = {"wasb": "imagenet", "tracknetv2": "unit", "monotrack": "unit"}
 
 
 def normalize(frames: np.ndarray, mode: str) -> np.ndarray:

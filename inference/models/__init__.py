@@ -16,18 +16,27 @@ Example:
     >>> load_weights(model, "wasb_tennis_best.pth.tar")      # never downloaded: a file you provide
     >>> logits = model.eval()(frames)                          # (1, 9, 288, 512) -> (1, 3, 288, 512)
 """
-from .checkpoint import load_weights, save_wasb_checkpoint
+from .checkpoint import (
+    DetectorInput,
+    UntrustedCheckpointError,
+    load_detector,
+    load_weights,
+    save_wasb_checkpoint,
+)
 from .monotrack import MonoTrack
 from .registry import MODEL_NAMES, build_model
 from .tracknetv2 import TrackNetV2
 from .wasb import WASB
 
 __all__ = [
+    "DetectorInput",
     "MODEL_NAMES",
     "MonoTrack",
     "TrackNetV2",
+    "UntrustedCheckpointError",
     "WASB",
     "build_model",
+    "load_detector",
     "load_weights",
     "save_wasb_checkpoint",
 ]

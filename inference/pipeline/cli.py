@@ -26,7 +26,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, help="output clip folder (a video: default runs/infer/<stem>; a clip: in "
                    "place); with several inputs, the parent folder of one clip folder each")
     p.add_argument("--detector", type=Path, help="ball-detector checkpoint (default: the shipped weights)")
-    p.add_argument("--detector-model", choices=["wasb", "tracknetv2", "monotrack"], default="wasb")
+    p.add_argument("--detector-model", choices=["wasb", "tracknetv2", "monotrack"], default="wasb",
+                   help="architecture when the checkpoint does not name one (rally3d's files name it)")
+    p.add_argument("--trust-checkpoint", action="store_true",
+                   help="allow a detector checkpoint that holds pickled Python objects (unpickling runs code "
+                   "stored in the file: only for files you trust); without it such a file is refused")
     p.add_argument("--events", type=Path, help="hit-event model file (default: the shipped model of the sport)")
     p.add_argument("--pose", default="auto", help="pose backend: auto (MoveNet if installed), none, movenet, "
                    "rtmpose, rtmo")
@@ -51,7 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _config(args: argparse.Namespace):
     from .stages import PipelineConfig
 
-    return PipelineConfig(detector=args.detector_model, detector_weights=args.detector, step=args.step,
+    return PipelineConfig(detector=args.detector_model, detector_weights=args.detector,
+                          trust_checkpoint=args.trust_checkpoint, step=args.step,
                           batch_size=args.batch_size, events=args.events, pose=args.pose,
                           pose_model=args.pose_model, method=args.method, device=args.device,
                           overwrite=args.overwrite, progress=not args.no_progress)

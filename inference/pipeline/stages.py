@@ -35,6 +35,7 @@ class PipelineConfig:
 
     Attributes:
         detector: ``wasb``, ``tracknetv2`` or ``monotrack``; detector_weights: checkpoint (None: shipped).
+        trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
         pose: pose backend (``auto``: MoveNet if installed, ``none``: no players, or a backend name).
@@ -47,6 +48,7 @@ class PipelineConfig:
 
     detector: str = "wasb"
     detector_weights: Path | None = None
+    trust_checkpoint: bool = False
     step: int = 3
     batch_size: int = 1
     events: Path | None = None
@@ -150,7 +152,8 @@ def _detect_run(ctx: Context) -> Outcome:
     from inference.clipio import write_ball_csv
     from inference.detection.detect import BallDetectorRunner
 
-    runner = BallDetectorRunner.from_weights(ctx.cfg.detector, _weights_path(ctx), step=ctx.cfg.step,
+    runner = BallDetectorRunner.from_weights(ctx.cfg.detector, _weights_path(ctx), trust=ctx.cfg.trust_checkpoint,
+                                             step=ctx.cfg.step,
                                              batch_size=ctx.cfg.batch_size, device=ctx.cfg.device)
     result = runner.run(ctx.clip, progress=ctx.cfg.progress, tolerate_truncation=True)
     ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)

@@ -80,12 +80,13 @@ def test_registry():
 def test_public_format_round_trip(models, name, tmp_path):
     path = save_wasb_checkpoint(models[name], tmp_path / f"{name}_tennis_best.pth.tar", epoch=7, train_loss=0.25)
     ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    assert set(ckpt) == {"model_state_dict", "epoch", "train_loss"}
+    assert set(ckpt) == {"model_state_dict", "epoch", "train_loss", "rally3d_detector"}
     assert not any(k.startswith("module.") for k in ckpt["model_state_dict"])
 
     fresh = build_model(name)
     info = load_weights(fresh, path)
     assert info["format"] == "wasb" and info["meta"] == {"epoch": 7, "train_loss": 0.25}
+    assert info["input"].arch == name and info["input"].origin == "stored"
     assert info["missing_keys"] == info["unexpected_keys"] == []
     x = torch.randn(TINY)
     torch.testing.assert_close(forward(fresh, x), forward(models[name], x), rtol=0, atol=0)
@@ -137,8 +138,8 @@ def test_wrong_architecture_names_first_mismatching_tensor(models, tmp_path):
     msg = str(err.value)
     assert "'inc.double_conv.0.weight': expected (64, 9, 3, 3), found missing" in msg
     assert "121 missing, 428 unexpected" in msg
-    assert "model.name=wasb" in msg
-    assert len(msg) < 500
+    assert "model.net.name=wasb" in msg and "--model wasb" in msg
+    assert len(msg) < 600
 
 
 def test_one_reshaped_tensor_is_named(models):
@@ -168,7 +169,7 @@ def test_missing_file_is_explained(tmp_path):
     with pytest.raises(FileNotFoundError) as err:
         load_weights(WASB(), path)
     assert str(path) in str(err.value)
-    assert "never downloads" in str(err.value) and "model.pretrained=PATH" in str(err.value)
+    assert "never downloads" in str(err.value) and "init_weights=PATH" in str(err.value)
 
 
 def test_not_a_checkpoint():
@@ -177,12 +178,13 @@ def test_not_a_checkpoint():
 
 
 def test_pickled_objects_need_consent(models, tmp_path):
+    from inference.models import UntrustedCheckpointError
+
     path = tmp_path / "with_config.pth.tar"
     torch.save({"model_state_dict": models["wasb"].state_dict(), "cfg": argparse.Namespace(lr=1.0)}, path)
-    with pytest.raises(ValueError, match="allow_pickle=False"):
-        load_weights(WASB(), path, allow_pickle=False)
-    with pytest.warns(UserWarning, match="weights_only=False"):
-        info = load_weights(WASB(), path)
+    with pytest.raises(UntrustedCheckpointError, match=r"argparse.Namespace.*--trust-checkpoint"):
+        load_weights(WASB(), path)
+    info = load_weights(WASB(), path, trust=True)
     assert info["format"] == "wasb"
 
 
