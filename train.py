@@ -10,6 +10,9 @@ os.environ.setdefault("PROJECT_ROOT", str(Path(__file__).resolve().parent))
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
+    from training.preflight import check_data
+
+    check_data(cfg)  # before torch and Lightning are imported: a missing dataset is made or named at once
     from training.run import train
 
     metrics = train(cfg)

@@ -1,11 +1,15 @@
 """Training data for the ball detectors: N-frame windows of clip folders with heatmap targets.
 
-* Clips come from a dataset folder with ``manifest.yaml`` (splits by clip or match) or a list of clips.
+* Clips come from a dataset folder with ``manifest.yaml``, a folder of clip folders (a manifest is inferred,
+  :mod:`training.datasets`), several of these mixed with weights (``root_weights``), or lists of clips.
+  Clips without ``ball.csv`` (not labelled yet) are skipped with a warning.
 * Frames are resized once, aspect-preserving (letterbox), to the network size and cached as ``uint8``
   arrays on disk, so epochs after the first never decode video again (``cache_dir``).
 * Targets: a binary disk of ``radius`` px (net resolution) around the ball of each output frame whose
   visibility is in ``visible_flags``; real-valued maps for the hard frames of ``soft_flags`` (e.g. [2]);
-  all-zero maps otherwise.
+  all-zero maps otherwise. Frames without a ``ball.csv`` row (never labelled) and frames whose visibility
+  is in ``ignore_flags`` (default [3], occluded) are left out of the loss (``meta["labelled"]``): a
+  partially labelled clip trains on its labelled frames only.
 * CPU-friendly training: random ``crop`` windows (a multiple of 8), centred near the ball with
   probability ``ball_crop_prob`` and anywhere otherwise (background crops teach what is *not* a ball).
 * Augmentation: horizontal flip, brightness/contrast jitter, scale-crop; the published normalisation
@@ -18,18 +22,20 @@ Example:
 from __future__ import annotations
 
 import hashlib
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import lightning as L
 import numpy as np
 import torch
-from torch.utils.data import DataLoader, Dataset
+from torch.utils.data import DataLoader, Dataset, WeightedRandomSampler
 
-from inference.clipio import Clip, FormatError, Manifest
+from inference.clipio import Clip, FormatError
 from inference.detection.geometry import Letterbox
 from inference.detection.preprocess import normalize
 
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -104,6 +110,7 @@ class WindowSpec:
     radius: float = 2.5
     visible_flags: tuple[int, ...] = (1, 2)
     soft_flags: tuple[int, ...] = ()  # visibilities that get a real-valued (Gaussian) map instead of a disk
+    ignore_flags: tuple[int, ...] = (3,)  # visibilities left out of the loss (like unlabelled frames)
     crop: tuple[int, int] | None = None
     ball_crop_prob: float = 0.7
     normalize: str = "imagenet"
@@ -114,11 +121,12 @@ class WindowSpec:
 
 
 class BallWindows(Dataset):
-    """All windows of ``frames_in`` consecutive frames of some clips.
+    """All windows of ``frames_in`` consecutive frames of some clips with at least one labelled output frame.
 
     Item: ``x`` (3·frames_in, H, W) float32, ``y`` (frames_out, H, W) float32 heatmaps of the last
-    ``frames_out`` frames, and ``meta`` with the output frames' visibility (frames_out,), ball in original
-    pixels (frames_out, 2), the crop offset (2,) in net pixels, the clip index and the first frame.
+    ``frames_out`` frames, and ``meta`` with the output frames' visibility (frames_out,; -1 = not labelled),
+    ``labelled`` (frames_out,) bool (the frames the loss counts), ball in original pixels (frames_out, 2),
+    the crop offset (2,) in net pixels, the clip index and the first frame.
     """
 
     def __init__(self, clips: list[ClipData], spec: WindowSpec, seed: int = 0):
@@ -129,9 +137,10 @@ class BallWindows(Dataset):
         self.clips, self.spec, self.seed = clips, spec, seed
         self.index = [(c, s) for c, cd in enumerate(clips)
                       for s in range(0, len(cd.visibility) - spec.frames_in + 1, spec.step)
-                      if (cd.visibility[s + spec.frames_in - spec.frames_out: s + spec.frames_in] >= 0).any()]
+                      if _counts(cd.visibility[s + spec.frames_in - spec.frames_out: s + spec.frames_in], spec)]
         if not self.index:
-            raise ValueError("no labelled windows: every clip is shorter than frames_in or has no ball.csv rows")
+            raise ValueError("no labelled windows: every clip is shorter than frames_in or has no ball.csv rows "
+                             f"(other than visibility {list(spec.ignore_flags)}, which is left out)")
         self.epoch = 0
 
     def __len__(self) -> int:
@@ -148,6 +157,7 @@ class BallWindows(Dataset):
         imgs = np.asarray(cd.frames[s:s + spec.frames_in], dtype=np.float32)         # (F, H, W, 3)
         out = slice(s + spec.frames_in - spec.frames_out, s + spec.frames_in)
         vis = cd.visibility[out].astype(np.int64)
+        labelled = (vis >= 0) & ~np.isin(vis, spec.ignore_flags)
         shown = np.isin(vis, spec.visible_flags)
         centres = np.where(shown[:, None], cd.xy_net[out], np.nan)                     # (Fo, 2) net px
         H, W = imgs.shape[1:3]
@@ -170,11 +180,16 @@ class BallWindows(Dataset):
         if soft.any():
             heat[soft] = soft_heatmaps(centres[soft], imgs.shape[1:3], spec.radius)
         x = normalize(imgs, spec.normalize)
-        meta = {"visibility": torch.as_tensor(vis), "xy_px": torch.as_tensor(cd.xy_px[out], dtype=torch.float32),
+        meta = {"visibility": torch.as_tensor(vis), "labelled": torch.as_tensor(labelled), "xy_px": torch.as_tensor(cd.xy_px[out], dtype=torch.float32),
                 "offset": torch.tensor([x0, y0], dtype=torch.float32),
                 "lb_scale": torch.tensor(cd.letterbox.scale, dtype=torch.float32),
                 "lb_pad": torch.tensor(cd.letterbox.offset, dtype=torch.float32), "clip": c, "start": s}
         return torch.from_numpy(x), torch.from_numpy(heat), meta
+
+
+def _counts(vis: np.ndarray, spec: WindowSpec) -> bool:
+    """Whether any of these output frames is labelled and not ignored."""
+    return bool(((vis >= 0) & ~np.isin(vis, spec.ignore_flags)).any())
 
 
 def _crop_origin(centres, hw, crop, p_ball, rng) -> tuple[int, int]:
@@ -226,52 +241,84 @@ def soft_heatmaps(centres: np.ndarray, hw: tuple[int, int], radius: float) -> np
 
 
 class BallDataModule(L.LightningDataModule):
-    """Lightning data module over a dataset folder (manifest.yaml) or explicit clip lists per split.
+    """Lightning data module over dataset folders (see the module docstring) or explicit clip lists per split.
 
     Args:
-        root: dataset folder with manifest.yaml (or None when ``train_clips``/``val_clips`` are given).
+        root: a dataset folder (manifest.yaml), a folder of clip folders, or a list of these (mixed).
+        root_weights: per root, its share of the training samples (None: in proportion to its windows).
+        split_seed: seed of an inferred manifest's split.
         net_size: (H, W) network input size; crop: (h, w) training crops or None for full frames.
-        cache_dir: where resized frames are cached (default ``<root>/.cache``).
+        ignore_flags: visibilities left out of the loss and of validation (default [3]: occluded).
+        cache_dir: where resized frames are cached (default ``<root>/.cache`` of each clip's root).
     """
 
-    def __init__(self, root: str | None = None, train_clips: list[str] | None = None,
+    def __init__(self, root: str | list[str] | None = None, train_clips: list[str] | None = None,
                  val_clips: list[str] | None = None, test_clips: list[str] | None = None,
                  net_size: tuple[int, int] = (288, 512), frames_in: int = 3, frames_out: int = 3,
                  crop: tuple[int, int] | None = None, ball_crop_prob: float = 0.7, radius: float = 2.5,
                  visible_flags: tuple[int, ...] = (1, 2), soft_flags: tuple[int, ...] = (),
-                 normalize: str = "imagenet", augment: bool = True,
+                 ignore_flags: tuple[int, ...] = (3,), normalize: str = "imagenet", augment: bool = True,
                  train_step: int = 1, batch_size: int = 8, num_workers: int = 0, cache_dir: str | None = None,
-                 seed: int = 1234):
+                 seed: int = 1234, root_weights: list[float] | None = None, split_seed: int | None = None):
         super().__init__()
         self.save_hyperparameters(logger=False)
         self.net_size = tuple(net_size)
         self.data: dict[str, BallWindows] = {}
+        self._sources = None
+        self.window_source: dict[str, np.ndarray] = {}  # per split: the source index of each window
 
-    def _clips(self, split: str) -> list[Clip]:
+    @property
+    def sources(self):
+        """The resolved roots (:class:`training.datasets.DataSource`), inferred manifests included."""
+        if self._sources is None:
+            from training.datasets import resolve_sources
+
+            hp = self.hparams
+            if hp.root is None:
+                raise ValueError("BallDataModule needs data.root (a dataset folder, a folder of clip folders, or a "
+                                 "list of them) or clip lists")
+            seed = hp.seed if hp.split_seed is None else hp.split_seed
+            self._sources = resolve_sources(hp.root, hp.root_weights, seed)
+        return self._sources
+
+    def _clips(self, split: str) -> list[tuple[Clip, int]]:
+        """(clip, source index; -1 for explicit lists) of ``split`` (``all``: every clip), labelled clips only."""
+        from training.datasets import skip_unlabelled
+
         hp = self.hparams
-        explicit = {"train": hp.train_clips, "val": hp.val_clips, "test": hp.test_clips}[split]
+        explicit = {"train": hp.train_clips, "val": hp.val_clips, "test": hp.test_clips}.get(split)
         if explicit is not None:
-            return [Clip(p) for p in explicit]
-        if hp.root is None:
-            raise ValueError("BallDataModule needs data.root (a dataset folder with manifest.yaml) or clip lists")
-        root = Path(hp.root)
-        if not (root / "manifest.yaml").is_file():
-            raise FileNotFoundError(f"no manifest.yaml in {root}: generate data with `rally3d synth --out {root}` "
-                                    "or point data.root to a dataset folder")
-        return [Clip(p) for p in Manifest.load(root).paths(split)]
+            return [(Clip(p), -1) for p in explicit]
+        out = []
+        for k, src in enumerate(self.sources):
+            clips = skip_unlabelled([Clip(p) for p in src.paths(split)], "ball.csv", f"{src.root} ({split})")
+            out += [(c, k) for c in clips]
+        return out
+
+    def _cache_dir(self, clip: Clip, k: int) -> Path:
+        """``cache_dir``, else ``.cache`` in the clip's root (k = -1: an explicit clip, its parent folder)."""
+        if self.hparams.cache_dir:
+            return Path(self.hparams.cache_dir)
+        return (clip.root.parent if k < 0 else self.sources[k].root) / ".cache"
 
     def _windows(self, split: str) -> BallWindows:
         hp = self.hparams
-        cache = Path(hp.cache_dir) if hp.cache_dir else Path(hp.root or ".") / ".cache"
-        clips = [load_clip(c, self.net_size, cache, progress=True) for c in self._clips(split)]
-        if not clips:
-            raise ValueError(f"the {split} split has no clips")
+        pairs = self._clips(split)
+        if not pairs and split == "val" and hp.val_clips is None:
+            log.warning("no labelled validation clips: validating on the training clips (the F1 is optimistic); "
+                        "give the dataset a val split (manifest.yaml, or more clips) for an honest one")
+            pairs = self._clips("train")
+        if not pairs:
+            raise ValueError(f"the {split} split has no labelled clips (with ball.csv) in {hp.root}")
+        clips = [load_clip(c, self.net_size, self._cache_dir(c, k), progress=True) for c, k in pairs]
         train = split == "train"
         spec = WindowSpec(hp.frames_in, hp.frames_out, hp.train_step if train else hp.frames_out, hp.radius,
                           tuple(hp.visible_flags), tuple(hp.soft_flags) if train else (),
-                          tuple(hp.crop) if (train and hp.crop) else None,
+                          tuple(hp.ignore_flags), tuple(hp.crop) if (train and hp.crop) else None,
                           hp.ball_crop_prob, hp.normalize, bool(hp.augment and train))
-        return BallWindows(clips, spec, hp.seed)
+        windows = BallWindows(clips, spec, hp.seed)
+        self.window_source[split] = np.array([max(pairs[c][1], 0) for c, _ in windows.index], dtype=np.int64)
+        return windows
 
     def setup(self, stage: str | None = None) -> None:
         wanted = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), None: ("train", "val")}
@@ -279,8 +326,24 @@ class BallDataModule(L.LightningDataModule):
             if split not in self.data:
                 self.data[split] = self._windows(split)
 
+    def sample_weights(self) -> np.ndarray | None:
+        """Per training window, its sampling weight when ``root_weights`` mixes several roots (else None):
+        each root's windows share its weight equally."""
+        weights = self.hparams.root_weights
+        if not weights or len(weights) < 2:
+            return None
+        src = self.window_source["train"]
+        counts = np.bincount(src, minlength=len(weights)).astype(float)
+        w = np.asarray(weights, float)[src] / np.maximum(counts[src], 1)
+        return w / w.sum()
+
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
-        return DataLoader(self.data[split], batch_size=self.hparams.batch_size, shuffle=shuffle,
+        sampler = None
+        if split == "train" and (w := self.sample_weights()) is not None:
+            sampler = WeightedRandomSampler(torch.as_tensor(w, dtype=torch.double), len(w), replacement=True,
+                                            generator=torch.Generator().manual_seed(int(self.hparams.seed)))
+            shuffle = False
+        return DataLoader(self.data[split], batch_size=self.hparams.batch_size, shuffle=shuffle, sampler=sampler,
                           num_workers=self.hparams.num_workers, persistent_workers=self.hparams.num_workers > 0,
                           collate_fn=collate)
 

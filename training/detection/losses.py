@@ -31,23 +31,34 @@ class HeatmapLoss(nn.Module):
             raise ValueError(f"unknown heatmap loss {kind!r}; choose one of {', '.join(KINDS)}")
         self.kind, self.gamma, self.beta, self.dice_weight = kind, gamma, beta, dice_weight
 
-    def forward(self, logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    def forward(self, logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """Loss of (B, F, H, W) logits against targets; ``mask`` (B, F) bool/float selects the frames that
+        count (unlabelled frames: 0). Each counted frame weighs the same; no counted frame gives 0."""
         if logits.shape != target.shape:
             raise ValueError(f"logits {tuple(logits.shape)} and targets {tuple(target.shape)} differ")
         p = torch.sigmoid(logits).clamp(EPS_P, 1 - EPS_P)
         y = target.to(p.dtype)
+        w = None if mask is None else mask.to(p.dtype)[..., None, None].expand_as(p)
         if self.kind in ("wbce", "focal"):
             g = 2.0 if self.kind == "wbce" else self.gamma
-            loss = (1 - p) ** g * y * torch.log(p) + p**g * (1 - y) * torch.log(1 - p)
-            return -loss.mean()
+            loss = -((1 - p) ** g * y * torch.log(p) + p**g * (1 - y) * torch.log(1 - p))
+            return _mean(loss, w)
         bce = -(y * torch.log(p) + (1 - y) * torch.log(1 - p))
         if self.kind == "qfl":
-            return ((p - y).abs() ** self.beta * bce).mean()
+            return _mean((p - y).abs() ** self.beta * bce, w)
         if self.kind == "bce":
-            return bce.mean()
-        inter = (p * y).sum()
-        dice = 2 * (inter + EPS_P) / (p.sum() + y.sum() + EPS_P)
-        return (1 - self.dice_weight) * bce.mean() - self.dice_weight * dice
+            return _mean(bce, w)
+        pm, ym = (p, y) if w is None else (p * w, y * w)
+        inter = (pm * ym).sum()
+        dice = 2 * (inter + EPS_P) / (pm.sum() + ym.sum() + EPS_P)
+        return (1 - self.dice_weight) * _mean(bce, w) - self.dice_weight * dice
+
+
+def _mean(loss: torch.Tensor, w: torch.Tensor | None) -> torch.Tensor:
+    """Mean over every element, or over the elements of the frames ``w`` keeps (0 when it keeps none)."""
+    if w is None:
+        return loss.mean()
+    return (loss * w).sum() / w.sum().clamp_min(1.0)
 
 
 def bce_with_logits(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

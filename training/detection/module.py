@@ -2,7 +2,9 @@
 
 Validation decodes each output heatmap like inference does (threshold, connected components, the
 best-scoring blob), maps it back to original-frame pixels and counts TP/FP1/FP2/FN/TN at ``tau_px``
-(original pixels); ``val/f1`` chooses the best checkpoint.
+(original pixels), leaving out unlabelled frames and the visibilities of ``ignore_flags`` as ``eval.py``
+does; ``val/f1`` chooses the best checkpoint. The loss counts only the labelled frames of a window.
+Every checkpoint stores the input description (``inference.models.checkpoint.META_KEY``).
 
 Example (what Hydra instantiates from conf/model/*.yaml):
     >>> module = BallDetector(net=build_model("wasb"), loss=HeatmapLoss("wbce"),
@@ -19,7 +21,9 @@ from torch import nn
 
 from inference.detection.metrics import evaluate_detections
 from inference.detection.postprocess import heatmap_to_candidates
-from inference.models.checkpoint import load_weights
+from inference.models.checkpoint import META_KEY, DetectorInput, architecture_of, load_weights
+from training.finetune import freeze as freeze_layers
+from training.finetune import hold_frozen_norms, trainable
 
 
 class BallDetector(L.LightningModule):
@@ -30,7 +34,11 @@ class BallDetector(L.LightningModule):
         loss: heatmap loss on logits (training/detection/losses.py).
         optimizer: a partial taking the parameters; scheduler: a partial taking the optimizer (or None).
         pretrained: a checkpoint to start from (WASB-SBDT public format or ours); never downloaded.
+        trust_checkpoint: allow ``pretrained`` to hold pickled objects (runs their code).
+        freeze: prefixes of parameter names that do not learn (e.g. WASB's stem ``[conv1, bn1, conv2, bn2,
+            layer1]``); their batch-norm statistics stay as loaded.
         tau_px: validation distance threshold in original-frame pixels.
+        ignore_flags: ground-truth visibilities left out of validation (default [3]: occluded, as eval.py).
         threshold: heatmap probability threshold of the blob detection.
         channels_last: keep weights and inputs in NHWC memory format (about ×1.4 faster training steps
             for WASB on a CPU; also what GPU tensor cores prefer). The state_dict is unchanged.
@@ -39,7 +47,8 @@ class BallDetector(L.LightningModule):
 
     def __init__(self, net: nn.Module, loss: nn.Module, optimizer: Callable, scheduler: Callable | None = None,
                  pretrained: str | None = None, tau_px: float = 10.0, threshold: float = 0.5,
-                 channels_last: bool = False, compile: bool = False):
+                 channels_last: bool = False, compile: bool = False, trust_checkpoint: bool = False,
+                 freeze: list[str] | None = None, ignore_flags: list[int] | None = (3,)):
         super().__init__()
         # factories are kept as attributes, not hyperparameters: checkpoints stay loadable with weights_only
         self.save_hyperparameters(logger=False, ignore=["net", "loss", "optimizer", "scheduler"])
@@ -47,7 +56,8 @@ class BallDetector(L.LightningModule):
         self.net = net
         self.loss_fn = loss
         if pretrained:
-            load_weights(self.net, pretrained)
+            load_weights(self.net, pretrained, trust=trust_checkpoint)
+        self.frozen = freeze_layers(self.net, freeze or [])
         if channels_last:
             self.net = self.net.to(memory_format=torch.channels_last)
         # kept out of the module tree so state_dict names stay those of the plain network
@@ -60,16 +70,33 @@ class BallDetector(L.LightningModule):
             x = x.contiguous(memory_format=torch.channels_last)
         return self._forward_fn["net"](x)
 
+    def train(self, mode: bool = True):
+        super().train(mode)
+        if mode and self.frozen:
+            hold_frozen_norms(self.net, self.frozen)
+        return self
+
+    def input_spec(self) -> DetectorInput:
+        """The input this network is trained on: the data module's normalisation and size when attached."""
+        dm = getattr(self._trainer, "datamodule", None) if self._trainer is not None else None
+        hp = dm.hparams if dm is not None and hasattr(dm, "hparams") else {}
+        net = self.net
+        return DetectorInput(architecture_of(net), int(getattr(net, "frames_in", 3)), int(getattr(net, "frames_out", 3)),
+                             str(hp.get("normalize", "imagenet")), tuple(hp.get("net_size", (288, 512))), "stored")
+
+    def on_save_checkpoint(self, checkpoint: dict) -> None:
+        checkpoint[META_KEY] = self.input_spec().to_dict()
+
     def training_step(self, batch, batch_idx):
-        x, y, _ = batch
-        loss = self.loss_fn(self(x), y)
+        x, y, meta = batch
+        loss = self.loss_fn(self(x), y, meta.get("labelled"))
         self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(x))
         return loss
 
     def _eval_step(self, batch, split: str):
         x, y, meta = batch
         logits = self(x)
-        loss = self.loss_fn(logits, y)
+        loss = self.loss_fn(logits, y, meta.get("labelled"))
         self.log(f"{split}/loss", loss, prog_bar=True, on_epoch=True, batch_size=len(x))
         probs = torch.sigmoid(logits).float().cpu().numpy()
         self._count(probs, meta, split)
@@ -106,7 +133,7 @@ class BallDetector(L.LightningModule):
         if not self.outputs[split]:
             return
         parts = [np.concatenate(a) for a in zip(*self.outputs[split])]
-        report = evaluate_detections(*parts, tau_px=self.hparams.tau_px)
+        report = evaluate_detections(*parts, tau_px=self.hparams.tau_px, ignore_flags=tuple(self.hparams.ignore_flags or ()))
         for name in ("precision", "recall", "f1", "accuracy", "ap", "rmse_px"):
             value = report.as_dict()[name]
             self.log(f"{split}/{name}", float(value) if value == value else 0.0, prog_bar=name == "f1")
@@ -119,7 +146,7 @@ class BallDetector(L.LightningModule):
         self._log_counts("test")
 
     def configure_optimizers(self):
-        opt = self.optimizer_factory(params=self.parameters())
+        opt = self.optimizer_factory(params=trainable(self))
         if self.scheduler_factory is None:
             return opt
         return {"optimizer": opt, "lr_scheduler": {"scheduler": self.scheduler_factory(optimizer=opt),
