@@ -49,9 +49,10 @@ def dataset_exists(root: str | Path) -> bool:
 
 
 def data_roots(cfg) -> list[str]:
-    """The folders a training / evaluation config reads (none for simulated hit-event data)."""
+    """The folders a training / evaluation config reads (none for simulated hit-event data; the crop model
+    falls back to the embedded sample by itself)."""
     data = cfg.get("data") or {}
-    if cfg.get("task") == "events" and data.get("source", "synthetic") != "folder" and "crop" not in data:
+    if cfg.get("task") == "events" and data.get("source") != "folder":
         return []
     root = data.get("root")
     if root is None:

@@ -23,6 +23,8 @@ from inference.clipio import BallTrack, Clip
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector, load_model_file
 from inference.events.metrics import format_event_table
+from inference.models.checkpoint import read_checkpoint
+from training.run import resume_path
 
 from .crop_data import CropEventDataModule
 from .run import test_and_export
@@ -88,11 +90,11 @@ def train_crop_events(cfg: DictConfig) -> dict[str, float]:
         torch.set_num_threads(int(cfg.threads))
     dm, module, trainer = build(cfg)
     dev = bool(cfg.trainer.get("fast_dev_run"))
-    trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
+    trainer.fit(module, datamodule=dm, ckpt_path=resume_path(cfg), weights_only=not cfg.get("trust_checkpoint", False))
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
     best = getattr(trainer.checkpoint_callback, "best_model_path", "") if trainer.checkpoint_callback else ""
     if best and not dev:
-        module.load_state_dict(torch.load(best, map_location="cpu", weights_only=False)["state_dict"])
+        module.load_state_dict(read_checkpoint(best)["state_dict"])
     metrics["events/temperature"] = calibrate_crop(module, dm)
     det = EventDetector("crop", dm.class_set, dm.features, DecodeParams(), net=module.net, window=dm.window,
                         last_k=dm.last_k, crop=dm.crop,

@@ -4,8 +4,10 @@ Sources of clips (``EventDataModule``):
 - ``source: synthetic`` — simulated rallies through random cameras (:mod:`.simulate`), train / val / test
   with different seeds;
 - ``source: folder`` — a dataset folder with ``manifest.yaml`` (``rally3d synth`` output, a converted
-  TrackNet ``Label.csv``, annotated clips): ``ball.csv`` and ``events.csv`` (``gt/events.csv`` if present)
-  of each clip of each split.
+  TrackNet ``Label.csv``), a folder of clip folders as the labeler writes them (a manifest is inferred,
+  :mod:`training.datasets`), or a list of these mixed with ``root_weights``: ``ball.csv`` and ``events.csv``
+  (``gt/events.csv`` if present) of each clip of each split. Clips without ``ball.csv`` or events are
+  skipped with a warning; missing ``ball.csv`` rows (a real tracker's) are frames without a ball.
 """
 from __future__ import annotations
 
@@ -18,10 +20,11 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from inference.clipio import Clip, FormatError, Manifest
+from inference.clipio import Clip, FormatError
 from inference.court import load_court
 from inference.events.classes import ClassSet
-from inference.events.features import FeatureConfig, clip_features, make_windows, to_ref_frames, window_labels
+from inference.events.features import (FeatureConfig, clip_features, make_windows, to_ref_frames, window_labels,
+                                       window_starts)
 
 from .degrade import DegradeConfig, degrade_all
 from .simulate import SimClip, simulate_clips
@@ -73,31 +76,43 @@ def with_tracks(clips: list[LabelledClip], tracks, features: FeatureConfig, cour
     return out
 
 
-def clips_from_folder(root: str | Path, split: str) -> list[SimClip]:
-    """The clips of one split of a dataset folder as :class:`SimClip` (camera None when absent)."""
-    root = Path(root)
-    if not (root / "manifest.yaml").is_file():
-        raise FileNotFoundError(f"no manifest.yaml in {root}: point data.root to a dataset folder "
-                                "(rally3d synth --out DIR, or training.events.tracknet.convert_tracknet_dataset)")
+def clips_from_folder(root, split: str, seed: int = 0, sources=None) -> list[SimClip]:
+    """The labelled clips of one split of a dataset folder, a folder of clip folders, or several of them
+    (``root`` a list), as :class:`SimClip` (camera None when absent). ``sources``: already resolved roots."""
+    return [c for c, _ in clips_with_source(root, split, seed, sources)]
+
+
+def clips_with_source(root, split: str, seed: int = 0, sources=None) -> list[tuple[SimClip, int]]:
+    """:func:`clips_from_folder` with the index of the root each clip comes from."""
+    from training.datasets import resolve_sources, skip_unlabelled
+
     out = []
-    for path in Manifest.load(root).paths(split):
-        clip = Clip(path)
-        info = clip.info
-        ball = clip.read_ball()
-        n = info.n_frames or (clip.n_frames if (clip.root / info.video).exists() else None)
-        n = n or (int(ball.frame[-1]) + 1 if len(ball) else 0)
-        gt_events = clip.gt_dir / "events.csv"
-        events = clip.read_events(gt=gt_events.is_file())
-        camera = None
-        for gt in (True, False):
-            try:
-                camera = clip.read_camera(gt=gt)
-                break
-            except (FileNotFoundError, OSError, FormatError):
-                continue
-        out.append(SimClip(str(clip.root), float(info.fps), int(info.width), int(info.height), n, ball, events,
-                           camera))
+    for k, src in enumerate(sources or resolve_sources(root, None, seed)):
+        clips = [Clip(p) for p in src.paths(split)]
+        clips = skip_unlabelled(clips, "ball.csv", f"{src.root} ({split})")
+        labelled = [c for c in clips if c.events_path.is_file() or (c.gt_dir / "events.csv").is_file()]
+        if len(labelled) < len(clips):
+            log.warning("%s (%s): %d clip(s) without events.csv skipped (events not labelled yet): %s", src.root,
+                        split, len(clips) - len(labelled), ", ".join(c.root.name for c in clips if c not in labelled))
+        out += [(_sim_clip(c), k) for c in labelled]
     return out
+
+
+def _sim_clip(clip: Clip) -> SimClip:
+    info = clip.info
+    ball = clip.read_ball()
+    n = info.n_frames or (clip.n_frames if (clip.root / info.video).exists() else None)
+    n = n or (int(ball.frame[-1]) + 1 if len(ball) else 0)
+    gt_events = clip.gt_dir / "events.csv"
+    events = clip.read_events(gt=gt_events.is_file())
+    camera = None
+    for gt in (True, False):
+        try:
+            camera = clip.read_camera(gt=gt)
+            break
+        except (FileNotFoundError, OSError, FormatError):
+            continue
+    return SimClip(str(clip.root), float(info.fps), int(info.width), int(info.height), n, ball, events, camera)
 
 
 # ------------------------------------------------------------------------------------------- windows
@@ -123,23 +138,36 @@ class WindowSet(Dataset):
 
 class BalancedSampler(Sampler):
     """Every positive window each epoch and a fresh random draw of ``neg_ratio`` × as many negatives
-    (MonoTrack keeps each negative with probability #pos/#neg)."""
+    (MonoTrack keeps each negative with probability #pos/#neg).
 
-    def __init__(self, labels: torch.Tensor, neg_ratio: float = 1.0, seed: int = 0, on_epoch=None):
+    With ``weights`` (N,) — per window, e.g. its root's share divided by the root's window count — the
+    positives and the negatives are each drawn (with replacement, same counts) in proportion to them:
+    how a few real clips are mixed with many synthetic ones."""
+
+    def __init__(self, labels: torch.Tensor, neg_ratio: float = 1.0, seed: int = 0, on_epoch=None,
+                 weights: torch.Tensor | None = None):
         self.on_epoch = on_epoch  # called at the start of each epoch (e.g. new degraded tracks)
         self.pos = torch.nonzero(labels > 0).flatten()
         self.neg = torch.nonzero(labels == 0).flatten()
         self.n_neg = min(len(self.neg), int(round(neg_ratio * max(len(self.pos), 1))))
+        self.weights = None if weights is None else torch.as_tensor(weights, dtype=torch.double)
         self.gen = torch.Generator().manual_seed(seed)
 
     def __len__(self) -> int:
         return len(self.pos) + self.n_neg
 
+    def _draw(self, idx: torch.Tensor, n: int) -> torch.Tensor:
+        if self.weights is None:
+            return idx[torch.randperm(len(idx), generator=self.gen)[:n]]
+        if n == 0 or len(idx) == 0:
+            return idx[:0]
+        return idx[torch.multinomial(self.weights[idx], n, replacement=True, generator=self.gen)]
+
     def __iter__(self):
         if self.on_epoch is not None:
             self.on_epoch()
-        neg = self.neg[torch.randperm(len(self.neg), generator=self.gen)[: self.n_neg]]
-        idx = torch.cat([self.pos, neg])
+        pos = self.pos if self.weights is None else self._draw(self.pos, len(self.pos))
+        idx = torch.cat([pos, self._draw(self.neg, self.n_neg)])
         return iter(idx[torch.randperm(len(idx), generator=self.gen)].tolist())
 
 
@@ -234,7 +262,9 @@ class EventDataModule(L.LightningDataModule):
 
     Args:
         sport, class_set: the class set (name or dict); features: :class:`FeatureConfig` fields.
-        window, last_k: W and K. source: ``synthetic`` or ``folder``; root: the dataset folder.
+        window, last_k: W and K. source: ``synthetic`` or ``folder``; root: a dataset folder, a folder of
+            clip folders, or a list of these; root_weights: per root, its share of the training windows
+            (None: by size); split_seed: seed of an inferred split (default ``seed``).
         n_train, n_val, n_test, seed: synthetic clip counts; seeds ``seed``, ``seed + 1``, ``seed + 2``.
         on_unmapped: ``error`` or ``warn`` for labels the class set does not cover.
         neg_ratio: negatives per positive per epoch. cache_dir: simulated clips are cached here.
@@ -248,7 +278,8 @@ class EventDataModule(L.LightningDataModule):
                  n_train: int = 600, n_val: int = 100, n_test: int = 200, seed: int = 0,
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
-                 degrade: dict | None = None):
+                 degrade: dict | None = None, root_weights: list[float] | None = None,
+                 split_seed: int | None = None):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -259,6 +290,9 @@ class EventDataModule(L.LightningDataModule):
         self.sport, self.class_set = sport, ClassSet.load(class_set)
         self.features = FeatureConfig.from_dict(features or {})
         self.window, self.last_k, self.source, self.root = window, last_k, source, root
+        self.root_weights, self.split_seed = root_weights, seed if split_seed is None else split_seed
+        self._sources = None
+        self.clip_source: dict[str, list[int]] = {}  # per split: the root index of each clip
         self.counts = {"train": n_train, "val": n_val, "test": n_test}
         self.seed, self.on_unmapped, self.neg_ratio = seed, on_unmapped, neg_ratio
         self.batch_size, self.num_workers, self.cache_dir = batch_size, num_workers, cache_dir
@@ -268,9 +302,24 @@ class EventDataModule(L.LightningDataModule):
         self.clips: dict[str, list[LabelledClip]] = {}
         self.sets: dict[str, WindowSet] = {}
 
+    @property
+    def sources(self):
+        """The resolved roots of ``source: folder`` (inferred manifests included)."""
+        if self._sources is None:
+            from training.datasets import resolve_sources
+
+            self._sources = resolve_sources(self.root, self.root_weights, self.split_seed)
+        return self._sources
+
     def raw_clips(self, split: str) -> list[SimClip]:
         if self.source == "folder":
-            clips = clips_from_folder(self.root, split)
+            pairs = clips_with_source(self.root, split, self.split_seed, self.sources)
+            if not pairs and split == "val":
+                log.warning("no labelled validation clips: tuning and checkpointing on the training clips "
+                            "(optimistic); give the dataset a val split for an honest one")
+                pairs = clips_with_source(self.root, "train", self.split_seed, self.sources)
+            clips = [c for c, _ in pairs]
+            self.clip_source[split] = [k for _, k in pairs]
         else:
             offset = {"train": 0, "val": 1, "test": 2}[split]
             clips = simulate_clips(self.sport, self.counts[split], self.seed * 10 + offset, self.cache_dir)
@@ -334,8 +383,20 @@ class EventDataModule(L.LightningDataModule):
                              f"class set {self.class_set.name})")
         redraw = self.redraw if self.degrade.enabled and self.degrade.every_epoch else None
         return DataLoader(ds, batch_size=self.batch_size,
-                          sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed, on_epoch=redraw),
+                          sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed, on_epoch=redraw,
+                                                  weights=self.window_weights()),
                           num_workers=self.num_workers)
+
+    def window_weights(self) -> torch.Tensor | None:
+        """Per training window, its sampling weight when ``root_weights`` mixes several roots (else None)."""
+        if self.source != "folder" or not self.root_weights or len(self.root_weights) < 2:
+            return None
+        clips, roots = self.labelled("train"), self.clip_source.get("train", [])
+        per_clip = [len(window_starts(len(c.feats), self.window)) for c in clips]  # as clip_windows cuts them
+        src = np.repeat(np.asarray(roots, np.int64), per_clip)
+        counts = np.bincount(src, minlength=len(self.root_weights)).astype(float)
+        w = np.asarray(self.root_weights, float)[src] / np.maximum(counts[src], 1)
+        return torch.as_tensor(w / w.sum())
 
     def val_dataloader(self):
         ds = self.sets["val"]

@@ -38,7 +38,7 @@ import numpy as np
 
 from inference.clipio import BallTrack
 
-from .simulate import SimClip
+from .simulate import SimClip, every_frame
 
 
 def _pair(name: str, v, lo: float = 0.0) -> tuple[float, float]:
@@ -212,17 +212,16 @@ def outlier_positions(xy_px: np.ndarray, detected: np.ndarray, rng: np.random.Ge
 
 def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = DegradeConfig(),
             track: BallTrack | None = None) -> Degraded:
-    """The clip's ball (``track``, default ``sim.ball``, one row per frame) as the detection pipeline would
-    write it. Rows stay one per frame; missed frames get visibility 0 and NaN positions."""
+    """The clip's ball (``track``, default ``sim.ball``) as the detection pipeline would write it. The result
+    has one row per frame; missed frames, and frames the input has no row for (a real tracker's missing
+    rows, an annotator's gaps), get visibility 0 and NaN positions."""
     from inference.detection.smooth import smooth_track
 
-    ball = track if track is not None else sim.ball
     n = sim.n_frames
+    ball = every_frame(track if track is not None else sim.ball, n)
     none = np.zeros(n, bool)
     if not cfg.enabled or rng.random() < cfg.p_clean:
         return Degraded(ball, none, none.copy(), none.copy(), False)
-    if len(ball) != n or not np.array_equal(ball.frame, np.arange(n)):
-        raise ValueError(f"{sim.name}: degrade needs one ball row per frame (0..{n - 1}), got {len(ball)} rows")
     size = np.array([sim.width, sim.height], float)
     visible = (ball.visibility > 0) & np.isfinite(ball.xy).all(axis=1)
     xy = ball.xy * size

@@ -10,6 +10,9 @@ from inference.events.classes import ClassSet
 from inference.events.features import FeatureConfig
 from inference.events.network import HitNet
 
+from training.finetune import freeze as freeze_layers
+from training.finetune import trainable
+
 from .data import AugmentConfig, augment_batch
 
 
@@ -36,12 +39,13 @@ class HitNetModule(L.LightningModule):
     def __init__(self, class_set: str | dict = "padel6", features: dict | None = None, hidden: int = 64,
                  layers: int = 2, bidirectional: bool = True, dropout: float = 0.0, lr: float = 3e-3,
                  weight_decay: float = 0.0, window: int = 12, last_k: int = 6, augment: dict | None = None,
-                 lr_patience: int = 3):
+                 lr_patience: int = 3, freeze: list[str] | None = None):
         super().__init__()
         self.save_hyperparameters()
         self.class_set = ClassSet.load(class_set)
         self.features = FeatureConfig.from_dict(features or {})
         self.net = HitNet(self.features.n_features, self.class_set.n, hidden, layers, bidirectional, dropout)
+        self.frozen = freeze_layers(self.net, freeze or [])
         self.aug = AugmentConfig(**(augment or {}))
         self.register_buffer("mirror_perm", torch.as_tensor(self.class_set.mirror_permutation()), persistent=False)
         self.loss = nn.CrossEntropyLoss()
@@ -84,7 +88,7 @@ class HitNetModule(L.LightningModule):
         self._eval_end("test")
 
     def configure_optimizers(self):
-        opt = torch.optim.Adam(self.parameters(), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
+        opt = torch.optim.Adam(trainable(self), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
         sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, mode="max", factor=0.5,
                                                            patience=self.hparams.lr_patience)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "monitor": "val/f1"}}

@@ -2,8 +2,10 @@
 
 ``train_events``: fit HitNet on balanced windows → calibrate the temperature on validation windows →
 tune the decoder on validation clips → export the model file (``<output_dir>/hitnet_<sport>.pth.tar``,
-and ``export_path`` when set) → evaluate the test clips with annotated and with detector-like ball
-positions (event-set metrics, thesis-style table).
+and ``export_path`` when set) → only then evaluate the test clips (event-set metrics, thesis-style
+table per class; a failing table is reported and the run still succeeds). The tables say what the ball
+input is (the clips' ``ball.csv``: annotated, tracker or detector); rows with synthetically degraded
+tracks are added only when asked (``degraded_rows``; ``auto``: for simulated data only).
 
 ``evaluate_events``: the same evaluation for an exported model file or a Lightning checkpoint.
 """
@@ -20,6 +22,8 @@ from omegaconf import DictConfig, OmegaConf
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector, load_model_file
 from inference.events.metrics import format_event_table
+from inference.models.checkpoint import read_checkpoint
+from training.run import guarded_table, resume_path, save_manifests, write_eval_results
 
 from .data import EventDataModule, WindowSet
 from .degrade import DegradeConfig, degrade_all
@@ -57,27 +61,59 @@ def tune(det: EventDetector, dm: EventDataModule, passes: int = 2) -> float:
     return f1
 
 
+def degraded_rows(cfg: DictConfig | None, dm) -> bool:
+    """Whether the tables add synthetic-degradation rows: ``degraded_rows`` true/false; ``auto`` → only for
+    simulated data (on real clips they would mix our noise model into a real track)."""
+    setting = "auto" if cfg is None else cfg.get("degraded_rows", "auto")
+    if setting in ("auto", None):
+        return getattr(dm, "source", "synthetic") == "synthetic"
+    return bool(setting)
+
+
+def ball_inputs(clips, dm, override: str = "auto") -> str:
+    """What the ball of these clips is, for table titles: ``annotated ball`` for simulated data, else the
+    kinds of the clips' ``ball.csv`` (:func:`training.datasets.ball_input`) with their counts."""
+    if getattr(dm, "source", "synthetic") == "synthetic":
+        return "annotated ball (simulated rallies)"
+    from inference.clipio import Clip
+    from training.datasets import ball_input
+
+    kinds: dict[str, int] = {}
+    for c in clips:
+        kind = ball_input(Clip(c.name), override) if Path(c.name).is_dir() else override.replace("auto", "annotated")
+        kinds[kind] = kinds.get(kind, 0) + 1
+    return "ball.csv: " + ", ".join(f"{k} ({v} clips)" for k, v in sorted(kinds.items()))
+
+
 def event_tables(det: EventDetector, dm: EventDataModule, name: str, split: str = "test",
-                 noise_seed: int = 7, max_clips: int | None = None) -> tuple[dict[str, float], str]:
-    """Event-set metrics on ``split`` (its first ``max_clips``) with annotated, detector-like
-    (:func:`perturb`) and pipeline-like (:func:`~training.events.degrade.degrade`, every clip degraded)
-    ball positions."""
+                 noise_seed: int = 7, max_clips: int | None = None, cfg: DictConfig | None = None
+                 ) -> tuple[dict[str, float], str, list[dict]]:
+    """Event-set metrics on ``split`` (its first ``max_clips``) with the clips' own ball track (``gt``);
+    with :func:`degraded_rows`, also detector-like (:func:`perturb`, ``e2e``) and pipeline-like
+    (:func:`~training.events.degrade.degrade`, every clip degraded, ``deg``) tracks made from it.
+    Returns the scores, the Markdown tables and one flat row per table line (results files)."""
     clips = [c.sim for c in dm.labelled(split)][: max_clips or None]
     scorer = detector_scorer(det)
     rng = np.random.default_rng(noise_seed)
-    degraded = degrade_all(clips, noise_seed, DegradeConfig(p_clean=0.0))
-    out, tables = {}, []
-    what = {"gt": "annotated ball", "e2e": "detector-like ball (misses, jitter, false positives)",
-            "deg": "pipeline-like ball (training.events.degrade, every clip degraded)"}
-    for mode, tracks in (("gt", [c.ball for c in clips]), ("e2e", [perturb(c, rng) for c in clips]),
-                         ("deg", degraded)):
-        probs = score_all(scorer, clips, tracks, desc=f"{split} {mode}")
+    modes = [("gt", ball_inputs(clips, dm, str(cfg.get("ball_input", "auto")) if cfg is not None else "auto"),
+              lambda: [c.ball for c in clips])]
+    if degraded_rows(cfg, dm):
+        modes += [("e2e", "detector-like ball made from it (misses, jitter, false positives)",
+                   lambda: [perturb(c, rng) for c in clips]),
+                  ("deg", "pipeline-like ball made from it (training.events.degrade, every clip degraded)",
+                   lambda: degrade_all(clips, noise_seed, DegradeConfig(p_clean=0.0)))]
+    out, tables, rows = {}, [], []
+    for mode, what, tracks in modes:
+        probs = score_all(scorer, clips, tracks(), desc=f"{split} {mode}")
         counts = counts_for(probs, clips, dm.class_set, det.ref_fps, det.decode_params)
         s = counts.scores()
         out.update({f"events/{mode}_{k}": v for k, v in s.items() if k in ("recall", "acc", "prec", "f1")})
-        tables.append(format_event_table([(name, counts)], title=f"{split}, {len(clips)} clips, {what[mode]}, "
+        tables.append(format_event_table([(name, counts)], title=f"{split}, {len(clips)} clips, {what}, "
                                          "tolerance ±2 frames at 50 fps (±1 at 25/30, ±2 at 60)"))
-    return out, "\n\n".join(tables)
+        for c, cname in [(None, "all"), *[(i + 1, n) for i, n in enumerate(counts.classes[1:])]]:
+            rows.append({"model": name, "split": split, "ball_input": what, "table": mode, "class": cname,
+                         **counts.scores(c)})
+    return out, "\n\n".join(tables), rows
 
 
 def train_events(cfg: DictConfig) -> dict[str, float]:
@@ -88,38 +124,60 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
         torch.set_num_threads(int(cfg.threads))  # small GRUs: one thread is fastest on a shared CPU
     dm, module, trainer = build(cfg)
     if cfg.get("init_weights"):  # fine-tune from an exported model file of the same architecture
-        module.net.load_state_dict(load_model_file(cfg.init_weights)["state_dict"])
-        log.info("initialised from %s", cfg.init_weights)
+        init_events(module, cfg.init_weights)
     metrics: dict[str, float] = {}
     dev = bool(cfg.trainer.get("fast_dev_run"))
-    trainer.fit(module, datamodule=dm, ckpt_path=cfg.get("ckpt_path"))
+    trainer.fit(module, datamodule=dm, ckpt_path=resume_path(cfg), weights_only=not cfg.get("trust_checkpoint", False))
     metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
     best = getattr(trainer.checkpoint_callback, "best_model_path", "") if trainer.checkpoint_callback else ""
     if best and not dev:
-        state = torch.load(best, map_location="cpu", weights_only=False)["state_dict"]
-        module.load_state_dict(state)
+        module.load_state_dict(read_checkpoint(best)["state_dict"])
     metrics["events/temperature"] = calibrate(module, dm)
     det = detector_from_module(module, dm, meta={"experiment": OmegaConf.to_container(cfg.get("tags") or []),
                                                  "data": {"source": dm.source, "root": dm.root,
                                                           "counts": dm.counts, "seed": dm.seed}})
     metrics["events/val_f1"] = det.meta["val_f1"] = tune(det, dm, passes=1 if dev else 2)
     name = f"HitNet {module.hparams.layers}×{module.hparams.hidden}{' bi' if module.hparams.bidirectional else ''}"
-    return test_and_export(cfg, det, dm, metrics, lambda: event_tables(det, dm, name))
+    save_manifests(dm, cfg)
+    return test_and_export(cfg, det, dm, metrics, lambda: event_tables(det, dm, name, cfg=cfg))
+
+
+def init_events(module, path: str | Path) -> None:
+    """Start from an exported hit-event model file of the same network (class set, features, size)."""
+    blob = load_model_file(path)
+    try:
+        module.net.load_state_dict(blob["state_dict"])
+    except RuntimeError as e:
+        raise ValueError(f"init_weights={path} does not fit this HitNet (model.hidden, model.layers, "
+                         f"data.features and data.class_set must match the file's): {str(e)[:300]}") from None
+    log.info("initialised from %s", path)
 
 
 def test_and_export(cfg: DictConfig, det: EventDetector, dm, metrics: dict[str, float], tables) -> dict[str, float]:
-    """After training: unless ``test=false``, score the test split (``tables() → (scores, markdown)``),
-    print the table and keep the scores in the model file's meta; then save the model file to the run
-    folder (and ``export_path``). Returns ``metrics`` with the test scores added."""
-    if cfg.get("test", True):
-        scores, table = tables()
-        metrics.update(scores)
-        det.meta["test"] = {k: float(v) for k, v in scores.items()}
+    """After training: save the model file to the run folder (and ``export_path``) first; then, unless
+    ``test=false``, score the test split (``tables() → (scores, markdown[, rows])``), print the table,
+    write the rows to ``<output_dir>/results.{json,csv}`` and save the model file again with the scores in
+    its meta. A failing table is reported (:func:`training.run.guarded_table`): the model stays saved.
+    Returns ``metrics`` with the test scores added."""
+    outs = [Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar"]
+    outs += [Path(cfg.export_path)] if cfg.get("export_path") else []
+    for out in outs:
+        det.save(out)
+        log.info("exported %s", out)
+    if not cfg.get("test", True):
+        return metrics
+
+    def run_tables() -> dict[str, float]:
+        scores, table, *rows = tables()
         print("\n" + table)
-    for out in (Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar", cfg.get("export_path")):
-        if out:
+        if rows:
+            write_eval_results(rows[0], cfg)
+        det.meta["test"] = {k: float(v) for k, v in scores.items()}
+        for out in outs:
             det.save(out)
-            log.info("exported %s", out)
+        return scores
+
+    metrics.update(guarded_table("test", run_tables, cfg))
     return metrics
 
 
@@ -130,8 +188,8 @@ def load_detector(path: str | Path, cfg: DictConfig, dm: EventDataModule) -> Eve
     except ValueError:
         pass
     module = hydra.utils.instantiate(cfg.model, _convert_="all")
-    state = torch.load(path, map_location="cpu", weights_only=False)
-    if "state_dict" not in state:
+    state = read_checkpoint(path, trust=bool(cfg.get("trust_checkpoint", False)))
+    if not isinstance(state, dict) or "state_dict" not in state:
         raise ValueError(f"{path} is neither a rally3d hit-event model nor a Lightning checkpoint")
     module.load_state_dict(state["state_dict"])
     calibrate(module, dm)
@@ -151,11 +209,17 @@ def evaluate_events(cfg: DictConfig) -> dict[str, float]:
         torch.set_num_threads(int(cfg.threads))
     dm = hydra.utils.instantiate(cfg.data, _convert_="all")
     det = load_detector(path, cfg, dm)
-    scores, table = event_tables(det, dm, f"{det.kind} ({path.name})", split=cfg.get("split", "test"),
-                                 max_clips=cfg.get("max_clips"))
+    split = str(cfg.get("split") or "test")
+    if split == "auto":
+        inferred = dm.source == "folder" and any(s.inferred for s in dm.sources)
+        split = "all" if inferred else "test"
+    scores, table, rows = event_tables(det, dm, f"{det.kind} ({path.name})", split=split,
+                                       max_clips=cfg.get("max_clips"), cfg=cfg)
     if "val_f1" in det.meta:
         print(f"\nvalidation event F1 after decoder tuning: {det.meta['val_f1']:.3f}")
     print("\n" + table)
+    paths = write_eval_results([{**r, "checkpoint": str(path)} for r in rows], cfg)
+    print(f"\nresults: {paths[0]}, {paths[1]}")
     if cfg.get("export_path"):  # e.g. a Lightning checkpoint, calibrated and tuned here, shipped as a model file
         det.meta["test"] = {k: float(v) for k, v in scores.items()}
         det.save(cfg.export_path)

@@ -117,11 +117,25 @@ class DetectorNoise:
     p_false: float = 0.02
 
 
+def every_frame(track: BallTrack, n_frames: int) -> BallTrack:
+    """``track`` with one row per frame ``0..n_frames-1``: frames without a row (a real tracker's missing
+    rows, an annotator's gaps) become visibility 0. Rows at or past ``n_frames`` are dropped."""
+    if len(track) == n_frames and np.array_equal(track.frame, np.arange(n_frames)):
+        return track
+    keep = track.frame < n_frames
+    dense = BallTrack(track.frame[keep], track.visibility[keep], track.xy[keep]).dense(n_frames)
+    vis = np.where(dense.labelled, dense.visibility, 0).astype(np.int8)
+    xy = np.where((vis > 0)[:, None], dense.xy, np.nan)
+    return BallTrack(np.arange(n_frames), vis, xy)
+
+
 def perturb(clip: SimClip, rng: np.random.Generator, noise: DetectorNoise = DetectorNoise()) -> BallTrack:
-    """The clip's ball track as a detector might return it."""
+    """The clip's ball track as a detector might return it (one row per frame; missing rows count as
+    not seen)."""
     n = clip.n_frames
-    vis = clip.ball.visibility.copy()
-    xy = clip.ball.xy.copy()
+    ball = every_frame(clip.ball, n)
+    vis = ball.visibility.copy()
+    xy = ball.xy.copy()
     size = np.array([clip.width, clip.height], float)
     seen = vis > 0
     xy[seen] += rng.normal(0, noise.jitter_px, (seen.sum(), 2)) / size
@@ -138,4 +152,4 @@ def perturb(clip: SimClip, rng: np.random.Generator, noise: DetectorNoise = Dete
         vis[i] = 1
     vis[miss & ~false] = 0
     xy[vis == 0] = np.nan
-    return BallTrack(clip.ball.frame, vis, np.clip(xy, 0, 1))
+    return BallTrack(ball.frame, vis, np.clip(xy, 0, 1))
