@@ -45,6 +45,8 @@ class SynthConfig:
         crf: H.264 quality.
         click_noise_px: uniform noise on court_points.csv (the true projections are in gt/camera.yaml).
         max_frames: cut long rallies to this many frames (None: keep all).
+        look_shift: draw the look from another distribution (:meth:`Appearance.shifted`), e.g. a stand-in
+            for real footage in fine-tuning benchmarks; the default looks are unchanged.
     """
 
     sport: str = "padel"
@@ -59,6 +61,7 @@ class SynthConfig:
     crf: int = 23
     click_noise_px: float = 1.0
     max_frames: int | None = None
+    look_shift: bool = False
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -145,6 +148,8 @@ def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
     spec = camera_spec(config, r_cam)
     camera = spec.build(court)
     look = Appearance.sample(r_look, config.sport) if config.randomise_look else Appearance.plain(config.sport)
+    if config.look_shift:
+        look = look.shifted(np.random.default_rng([seed, 7]))  # its own stream: the default draws are unchanged
     rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport,
                                  config=default_config(config.sport)), config.max_frames)
     poses = [articulate(p, spec.fps, r_body, sport=config.sport) for p in rally.players]

@@ -210,6 +210,20 @@ class Appearance:
             texture_seed=int(rng.integers(2**31)),
         )
 
+    def shifted(self, rng: np.random.Generator) -> Appearance:
+        """This look moved to another distribution than :meth:`sample` draws from (a stand-in for footage
+        a model never saw): floors outside the usual palette, dim tinted light, stronger sensor noise,
+        compression, motion and lens blur, a paler ball and stronger glass reflections."""
+        floors = ((96, 98, 104), (32, 118, 126), (104, 62, 118), (138, 140, 64))
+        return replace(
+            self, floor=_jitter(rng, floors[rng.integers(len(floors))], 12),
+            gain=float(rng.uniform(0.55, 0.8)), gamma=float(rng.uniform(1.1, 1.35)),
+            cast=tuple(float(c) for c in rng.uniform(0.85, 1.15, 3)), vignette=float(rng.uniform(0.2, 0.5)),
+            ball=_jitter(rng, (206, 214, 120), 12), noise_sigma=float(rng.uniform(5.0, 12.0)),
+            jpeg_quality=int(rng.integers(35, 66)), shutter=float(rng.uniform(0.7, 1.0)),
+            lens_blur=float(rng.uniform(0.6, 1.4)), reflection_strength=float(rng.uniform(0.4, 0.7)),
+        )
+
 
 # ======================================================================================================
 # Exposure
