@@ -56,6 +56,8 @@ def data_roots(cfg) -> list[str]:
         return []
     root = data.get("root")
     if root is None:
+        if cfg.get("task") != "events" and "_target_" in data:
+            raise SystemExit("no data.root: pass data.root=DIR (your clip folders, a dataset, or a list of them)")
         return []
     return [str(root)] if isinstance(root, (str, Path)) else [str(r) for r in root]
 

@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector, load_model_file
+from inference.events.features import FeatureConfig
 from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
 from training.run import guarded_table, resume_path, save_manifests, write_eval_results
@@ -124,7 +125,7 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
         torch.set_num_threads(int(cfg.threads))  # small GRUs: one thread is fastest on a shared CPU
     dm, module, trainer = build(cfg)
     if cfg.get("init_weights"):  # fine-tune from an exported model file of the same architecture
-        init_events(module, cfg.init_weights)
+        init_events(module, cfg.init_weights, dm)
     metrics: dict[str, float] = {}
     dev = bool(cfg.trainer.get("fast_dev_run"))
     trainer.fit(module, datamodule=dm, ckpt_path=resume_path(cfg), weights_only=not cfg.get("trust_checkpoint", False))
@@ -142,9 +143,20 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
     return test_and_export(cfg, det, dm, metrics, lambda: event_tables(det, dm, name, cfg=cfg))
 
 
-def init_events(module, path: str | Path) -> None:
-    """Start from an exported hit-event model file of the same network (class set, features, size)."""
+def init_events(module, path: str | Path, dm: EventDataModule | None = None) -> None:
+    """Start from an exported hit-event model file of the same network (class set, features, window):
+    a mismatch with the data's settings is an error naming the config keys to set."""
     blob = load_model_file(path)
+    if dm is not None:
+        wanted = {"data.window": blob.get("window"), "data.last_k": blob.get("last_k"),
+                  "data.class_set": blob["class_set"].get("name")}
+        have = {"data.window": dm.window, "data.last_k": dm.last_k, "data.class_set": dm.class_set.name}
+        feats = FeatureConfig.from_dict(blob["features"]).to_dict()
+        wanted.update({f"data.features.{k}": v for k, v in feats.items()})
+        have.update({f"data.features.{k}": v for k, v in dm.features.to_dict().items()})
+        diff = [f"{k}={wanted[k]}" for k in wanted if k in have and wanted[k] is not None and wanted[k] != have[k]]
+        if diff:
+            raise ValueError(f"init_weights={path} was trained with other data settings: set {' '.join(diff)}")
     try:
         module.net.load_state_dict(blob["state_dict"])
     except RuntimeError as e:

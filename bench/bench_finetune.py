@@ -1,0 +1,116 @@
+"""Benchmark fine-tuning on a few clips of unseen-looking footage: the shipped padel WASB before and after
+fine-tuning, against training from scratch with the same steps. Prints figures; asserts nothing.
+
+    .venv/bin/python bench/bench_finetune.py [--train-clips 6] [--test-clips 4] [--steps 300] [--threads 1]
+
+The clips stand in for real footage: rendered padel rallies whose look is drawn from another distribution
+than the shipped weights' training set (``SynthConfig(look_shift=True)``: other floors, dim tinted light,
+noise, heavy JPEG, blur, a paler ball). ``--train-clips`` clips train (one more validates), ``--test-clips``
+held-out clips of the same distribution score every model, whole clips at full resolution as inference runs
+(``eval.py``: τ = 10 px at 1280×720, the rally3d tracker and WASB-SBDT's max-score post-processing).
+Every arm runs the real commands (``train.py +experiment=wasb_padel_finetune``, ``eval.py``) in a child
+process; its CPU time (user + system, all threads) comes from ``getrusage(RUSAGE_CHILDREN)``. The data are
+generated once under ``--data`` and reused.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def make_data(root: Path, n_train: int, n_test: int, seed: int, max_frames: int) -> None:
+    """n_train + 1 (val) + n_test shifted-look clips with a manifest (generated once)."""
+    from inference.clipio import Manifest, ManifestEntry
+    from training.synth.generate import SynthConfig, generate_clip
+
+    if (root / "manifest.yaml").is_file():
+        return
+    cfg = SynthConfig(sport="padel", look_shift=True, max_frames=max_frames)
+    splits = ["train"] * n_train + ["val"] + ["test"] * n_test
+    entries = []
+    t0 = time.perf_counter()
+    for k, split in enumerate(splits):
+        name = f"clip_{k:04d}"
+        generate_clip(root / name, seed * 1000 + k, cfg)
+        entries.append(ManifestEntry(name, split))
+        print(f"  rendered {name} ({split}), {time.perf_counter() - t0:.0f} s", flush=True)
+    Manifest(root, entries, name=root.name, sport="padel",
+             source=f"bench_finetune: look_shift, seed {seed}").save()
+
+
+def run(cmd: list[str], log: Path, threads: int) -> float:
+    """Run a command (output to ``log``); returns its CPU seconds (user + system, every thread)."""
+    env = {**os.environ, "OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads), "PYTHONPATH": str(ROOT)}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with log.open("w") as f:
+        rc = subprocess.run(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, env=env).returncode
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if rc != 0:
+        raise SystemExit(f"failed ({rc}): {' '.join(cmd)} — see {log}")
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def evaluate(ckpt: Path, data: Path, out: Path, threads: int) -> tuple[dict[str, float], float]:
+    cpu = run([sys.executable, "eval.py", "+experiment=wasb_padel", f"ckpt_path={ckpt}", f"data.root={data}",
+               "split=test", "batch_size=1", f"hydra.run.dir={out}"], out.with_suffix(".log"), threads)
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    f1 = {f"{r['post']} τ{r['tau_px']:g}": r["f1"] for r in rows if r.get("table", "").startswith("tau")}
+    return f1, cpu
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--train-clips", type=int, default=6)
+    ap.add_argument("--test-clips", type=int, default=4)
+    ap.add_argument("--max-frames", type=int, default=150)
+    ap.add_argument("--steps", type=int, default=300, help="training steps of each arm (batches of 8 crops)")
+    ap.add_argument("--epochs", type=int, default=4)
+    ap.add_argument("--threads", type=int, default=1, help="torch threads of each child (CPU time is reported)")
+    ap.add_argument("--seed", type=int, default=77)
+    ap.add_argument("--data", type=Path, default=ROOT / "runs" / "bench_finetune" / "data")
+    ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_finetune")
+    a = ap.parse_args()
+    a.out.mkdir(parents=True, exist_ok=True)
+    print(f"data: {a.data} ({a.train_clips} train + 1 val + {a.test_clips} test clips, shifted look)", flush=True)
+    make_data(a.data, a.train_clips, a.test_clips, a.seed, a.max_frames)
+    per_epoch = max(1, a.steps // a.epochs)
+    common = [f"data.root={a.data}", f"trainer.max_epochs={a.epochs}", f"trainer.limit_train_batches={per_epoch}",
+              "test=false", "seed=1"]
+    arms = {
+        "fine-tuned (shipped weights, stem frozen, lr 2e-4)": ["+experiment=wasb_padel_finetune"],
+        "from scratch (lr 1e-3)": ["+experiment=wasb_padel_finetune", "init_weights=null", "model.freeze=[]",
+                                   "model.optimizer.lr=1e-3"],
+    }
+    shipped = ROOT / "inference" / "weights" / "wasb_padel.pth.tar"
+    results = [("shipped weights, not fine-tuned", 0.0, *evaluate(shipped, a.data, a.out / "eval_shipped", a.threads))]
+    print(f"  {results[-1]}", flush=True)
+    for k, (name, extra) in enumerate(arms.items()):
+        run_dir = a.out / f"arm{k}"
+        cpu = run([sys.executable, "train.py", *extra, *common, f"hydra.run.dir={run_dir}"], run_dir.with_suffix(".log"),
+                  a.threads)
+        f1, eval_cpu = evaluate(run_dir / "wasb.pth.tar", a.data, a.out / f"eval_arm{k}", a.threads)
+        results.append((name, cpu, f1, eval_cpu))
+        print(f"  {results[-1]}", flush=True)
+    keys = list(results[0][2])
+    print(f"\nFine-tuning on {a.train_clips} shifted-look padel clips ({per_epoch * a.epochs} steps × 8 crops of "
+          f"128×128, {a.threads} thread), F1 on {a.test_clips} held-out clips of that look (whole clips, τ = 10 px "
+          f"at 1280×720 and 4 px original):\n")
+    print("| model | training CPU time | " + " | ".join(f"F1 {k}" for k in keys) + " |")
+    print("|---|---|" + "---|" * len(keys))
+    for name, cpu, f1, _ in results:
+        cells = " | ".join(f"{100 * f1[k]:.1f} %" for k in keys)
+        print(f"| {name} | {cpu / 60:.1f} min | {cells} |")
+    print(f"\n(evaluation CPU time per arm: {', '.join(f'{r[3] / 60:.1f} min' for r in results)})")
+
+
+if __name__ == "__main__":
+    main()
