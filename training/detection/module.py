@@ -76,6 +76,12 @@ class BallDetector(L.LightningModule):
             hold_frozen_norms(self.net, self.frozen)
         return self
 
+    def on_train_batch_start(self, batch, batch_idx: int) -> None:
+        # Lightning restores submodule modes one by one after validation (bypassing train() above): the
+        # frozen layers' batch-norm statistics must stay those loaded, so hold them before every step
+        if self.frozen:
+            hold_frozen_norms(self.net, self.frozen)
+
     def input_spec(self) -> DetectorInput:
         """The input this network is trained on: the data module's normalisation and size when attached."""
         dm = getattr(self._trainer, "datamodule", None) if self._trainer is not None else None
