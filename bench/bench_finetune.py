@@ -59,9 +59,16 @@ def run(cmd: list[str], log: Path, threads: int) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def evaluate(ckpt: Path, data: Path, out: Path, threads: int) -> tuple[dict[str, float], float]:
-    cpu = run([sys.executable, "eval.py", "+experiment=wasb_padel", f"ckpt_path={ckpt}", f"data.root={data}",
-               "split=test", "batch_size=1", f"hydra.run.dir={out}"], out.with_suffix(".log"), threads)
+def evaluate(ckpt: Path, data: Path, out: Path, threads: int, reuse: bool = False) -> tuple[dict[str, float], float]:
+    """F1 of ``ckpt`` on the test clips (``eval.py``) and its CPU seconds; ``reuse``: an earlier result of
+    the same checkpoint and data (the shipped weights) is read instead of recomputed."""
+    cpu_file = out / "cpu_s.txt"
+    if reuse and cpu_file.is_file() and (out / "results.json").is_file():
+        cpu = float(cpu_file.read_text())
+    else:
+        cpu = run([sys.executable, "eval.py", "+experiment=wasb_padel", f"ckpt_path={ckpt}", f"data.root={data}",
+                   "split=test", "batch_size=1", f"hydra.run.dir={out}"], out.with_suffix(".log"), threads)
+        cpu_file.write_text(f"{cpu}\n")
     rows = json.loads((out / "results.json").read_text())["rows"]
     f1 = {f"{r['post']} τ{r['tau_px']:g}": r["f1"] for r in rows if r.get("table", "").startswith("tau")}
     return f1, cpu
@@ -74,6 +81,7 @@ def main() -> None:
     ap.add_argument("--max-frames", type=int, default=150)
     ap.add_argument("--steps", type=int, default=300, help="training steps of each arm (batches of 8 crops)")
     ap.add_argument("--epochs", type=int, default=4)
+    ap.add_argument("--val-batches", type=int, default=10, help="validation batches per epoch (best-epoch choice)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads of each child (CPU time is reported)")
     ap.add_argument("--seed", type=int, default=77)
     ap.add_argument("--data", type=Path, default=ROOT / "runs" / "bench_finetune" / "data")
@@ -84,14 +92,16 @@ def main() -> None:
     make_data(a.data, a.train_clips, a.test_clips, a.seed, a.max_frames)
     per_epoch = max(1, a.steps // a.epochs)
     common = [f"data.root={a.data}", f"trainer.max_epochs={a.epochs}", f"trainer.limit_train_batches={per_epoch}",
-              "test=false", "seed=1"]
+              f"trainer.limit_val_batches={a.val_batches}",
+              "test=false", "seed=1", "+trainer.num_sanity_val_steps=0"]
     arms = {
         "fine-tuned (shipped weights, stem frozen, lr 2e-4)": ["+experiment=wasb_padel_finetune"],
         "from scratch (lr 1e-3)": ["+experiment=wasb_padel_finetune", "init_weights=null", "model.freeze=[]",
                                    "model.optimizer.lr=1e-3"],
     }
     shipped = ROOT / "inference" / "weights" / "wasb_padel.pth.tar"
-    results = [("shipped weights, not fine-tuned", 0.0, *evaluate(shipped, a.data, a.out / "eval_shipped", a.threads))]
+    results = [("shipped weights, not fine-tuned", 0.0, *evaluate(shipped, a.data, a.out / "eval_shipped", a.threads,
+                                                                 reuse=True))]
     print(f"  {results[-1]}", flush=True)
     for k, (name, extra) in enumerate(arms.items()):
         run_dir = a.out / f"arm{k}"

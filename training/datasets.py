@@ -164,7 +164,7 @@ def ball_input(clip: Clip, override: str = "auto") -> str:
 
     ``auto``: ``detector`` when ``rally3d infer`` wrote it (its record in ``.rally3d/``), else
     ``annotated`` (labeler, synthetic ground truth, imported labels). A tracker's file imported from
-    elsewhere cannot be recognised: say so with ``data.ball_input=tracker``.
+    elsewhere cannot be recognised: say so with ``ball_input=tracker``.
     """
     if override != "auto":
         return override
