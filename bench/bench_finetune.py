@@ -9,15 +9,15 @@ noise, heavy JPEG, blur, a paler ball). ``--train-clips`` clips train (one more 
 held-out clips of the same distribution score every model, whole clips at full resolution as inference runs
 (``eval.py``: τ = 10 px at 1280×720, the rally3d tracker and WASB-SBDT's max-score post-processing).
 Every arm runs the real commands (``train.py +experiment=wasb_padel_finetune``, ``eval.py``) in a child
-process; its CPU time (user + system, all threads) comes from ``getrusage(RUSAGE_CHILDREN)``. The data are
+process; its CPU time (user + system, all threads) is that child's own (``os.wait4``). The data are
 generated once under ``--data`` and reused.
 """
 from __future__ import annotations
 
 import argparse
+from concurrent.futures import ThreadPoolExecutor
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -48,15 +48,16 @@ def make_data(root: Path, n_train: int, n_test: int, seed: int, max_frames: int)
 
 
 def run(cmd: list[str], log: Path, threads: int) -> float:
-    """Run a command (output to ``log``); returns its CPU seconds (user + system, every thread)."""
+    """Run a command (output to ``log``); returns its CPU seconds (user + system, every thread), from the
+    child's own resource usage (so commands can run side by side)."""
     env = {**os.environ, "OMP_NUM_THREADS": str(threads), "MKL_NUM_THREADS": str(threads), "PYTHONPATH": str(ROOT)}
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with log.open("w") as f:
-        rc = subprocess.run(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, env=env).returncode
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if rc != 0:
-        raise SystemExit(f"failed ({rc}): {' '.join(cmd)} — see {log}")
-    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise SystemExit(f"failed ({proc.returncode}): {' '.join(cmd)} — see {log}")
+    return usage.ru_utime + usage.ru_stime
 
 
 def evaluate(ckpt: Path, data: Path, out: Path, threads: int, reuse: bool = False) -> tuple[dict[str, float], float]:
@@ -82,6 +83,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=300, help="training steps of each arm (batches of 8 crops)")
     ap.add_argument("--epochs", type=int, default=4)
     ap.add_argument("--val-batches", type=int, default=10, help="validation batches per epoch (best-epoch choice)")
+    ap.add_argument("--parallel", action="store_true", help="run the two arms side by side (CPU time is per arm)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads of each child (CPU time is reported)")
     ap.add_argument("--seed", type=int, default=77)
     ap.add_argument("--data", type=Path, default=ROOT / "runs" / "bench_finetune" / "data")
@@ -103,13 +105,16 @@ def main() -> None:
     results = [("shipped weights, not fine-tuned", 0.0, *evaluate(shipped, a.data, a.out / "eval_shipped", a.threads,
                                                                  reuse=True))]
     print(f"  {results[-1]}", flush=True)
-    for k, (name, extra) in enumerate(arms.items()):
+    def arm(k: int, name: str, extra: list[str]) -> tuple:
         run_dir = a.out / f"arm{k}"
         cpu = run([sys.executable, "train.py", *extra, *common, f"hydra.run.dir={run_dir}"], run_dir.with_suffix(".log"),
                   a.threads)
         f1, eval_cpu = evaluate(run_dir / "wasb.pth.tar", a.data, a.out / f"eval_arm{k}", a.threads)
-        results.append((name, cpu, f1, eval_cpu))
-        print(f"  {results[-1]}", flush=True)
+        print(f"  {(name, cpu, f1, eval_cpu)}", flush=True)
+        return name, cpu, f1, eval_cpu
+
+    with ThreadPoolExecutor(len(arms) if a.parallel else 1) as pool:  # CPU times are per child either way
+        results += list(pool.map(lambda item: arm(item[0], *item[1]), enumerate(arms.items())))
     keys = list(results[0][2])
     print(f"\nFine-tuning on {a.train_clips} shifted-look padel clips ({per_epoch * a.epochs} steps × 8 crops of "
           f"128×128, {a.threads} thread), F1 on {a.test_clips} held-out clips of that look (whole clips, τ = 10 px "

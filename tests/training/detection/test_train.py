@@ -50,7 +50,7 @@ def small(tiny: Path, sport: str) -> list[str]:
 
 @pytest.mark.parametrize("experiment", EXPERIMENTS)
 def test_experiment_fast_dev_run(experiment, tiny, tmp_path):
-    sport = experiment.split("_")[-1]
+    sport = experiment.split("_")[1]  # wasb_padel, wasb_padel_finetune
     cfg = compose_cfg([f"+experiment={experiment}", "trainer.fast_dev_run=true", *small(tiny, sport)], tmp_path)
     assert cfg.model.net.name == experiment.split("_")[0]
     metrics = train(cfg)
