@@ -58,3 +58,43 @@ def test_init_weights_with_another_normalisation_is_refused_naming_the_key(label
                                          r"data.normalize=imagenet"):
         build(cfg)
     assert read_checkpoint(SHIPPED / "wasb_padel.pth.tar").get(META_KEY, {}).get("normalize") in (None, "imagenet")
+
+
+class _CreatesFile:
+    """Unpickling this object calls ``open(marker, "w")``: it creates a file on disk."""
+
+    def __init__(self, marker: Path):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        import builtins
+
+        return builtins.open, (self.marker, "w")
+
+
+@pytest.mark.parametrize("how", ["init_weights", "model.pretrained", "ckpt_path", "eval ckpt_path", "events"])
+def test_training_never_unpickles_a_checkpoint_without_trust(how, labeler_clips, tmp_path):
+    """train.py / eval.py refuse a file holding pickled objects (the payload would create a file) unless
+    trust_checkpoint=true; the error names the opt-in."""
+    from inference.models import UntrustedCheckpointError
+    from training.run import build, evaluate, resume_path
+
+    marker = tmp_path / "pwned.txt"
+    evil = tmp_path / "evil.pth.tar"
+    torch.save({"model_state_dict": build_model("wasb").state_dict(), "payload": _CreatesFile(marker)}, evil)
+    det = ["+experiment=wasb_padel", *small_detector(labeler_clips, tmp_path / "cache")]
+    if how == "events":  # hit-event model files are read with the allow-list only (no opt-in exists)
+        from training.events.run import init_events
+
+        with pytest.raises(ValueError, match="not a readable rally3d hit-event model"):
+            init_events(None, evil)
+    else:
+        with pytest.raises(UntrustedCheckpointError, match="trust_checkpoint=true"):
+            if how in ("init_weights", "model.pretrained"):
+                build(compose_cfg([*det, f"{how}={evil}"], tmp_path / "run"))
+            elif how == "ckpt_path":
+                resume_path(compose_cfg([*det, f"ckpt_path={evil}"], tmp_path / "run"))
+            else:
+                ev = [o for o in det if "progress_log" not in o]  # eval has no callbacks
+                evaluate(compose_cfg([*ev, f"ckpt_path={evil}"], tmp_path / "eval", name="eval"))
+    assert not marker.exists()
