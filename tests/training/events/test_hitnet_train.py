@@ -41,18 +41,20 @@ def compose_cfg(overrides: list[str], tmp_path: Path, name: str = "train"):
 
 @pytest.mark.parametrize("experiment", HITNET_EXPERIMENTS)
 def test_hitnet_experiment_fast_dev_run(experiment, tmp_path):
-    cfg = compose_cfg([f"+experiment={experiment}", "trainer.fast_dev_run=true", *TINY,
+    # *_finetune experiments read your clip folders (tests/training/test_clip_folders.py); here: simulated data
+    data = ["data.source=synthetic"] if experiment.endswith("_finetune") else []
+    cfg = compose_cfg([f"+experiment={experiment}", "trainer.fast_dev_run=true", *TINY, *data,
                        f"data.cache_dir={tmp_path}/cache"], tmp_path)
     assert cfg.task == "events" and cfg.model._target_.endswith("HitNetModule")
     metrics = train(cfg)
     assert torch.isfinite(torch.tensor(metrics["train/loss_step"]))
     assert 0.05 <= metrics["events/temperature"] <= 20
-    sport = experiment.split("_")[-1]
+    sport = experiment.split("_")[1]  # hitnet_padel, hitnet_padel_finetune
     model = tmp_path / f"hitnet_{sport}.pth.tar"
     det = EventDetector.from_checkpoint(model)  # the exported file loads without the config
     assert det.class_set.sport == sport and det.net is not None
     assert "events/gt_f1" in metrics and "events/e2e_f1" in metrics
-    ev = compose_cfg([f"+experiment={experiment}", *TINY, f"data.cache_dir={tmp_path}/cache",
+    ev = compose_cfg([f"+experiment={experiment}", *TINY, *data, f"data.cache_dir={tmp_path}/cache",
                       f"ckpt_path={model}"], tmp_path / "e", name="eval")
     scores = evaluate(ev)
     assert set(scores) >= {"events/gt_f1", "events/e2e_recall"}
