@@ -138,3 +138,29 @@ def test_progress_lines_say_step_loss_speed_and_eta(tiny_padel, tmp_path, monkey
                          r"\d+m\d\ds, run \d+m\d\ds", ln) for ln in step), step
     assert sum(ln.startswith("epoch ") and " done after " in ln for ln in lines) == 2
     assert (tmp_path / "run" / "checkpoints" / "last.ckpt").is_file()  # every epoch end, validation or not
+
+
+def test_an_exception_mid_epoch_leaves_last_ckpt_at_the_step_reached(tiny_padel, tmp_path, monkeypatch):
+    import lightning as L
+
+    import training.run as run
+
+    class Boom(L.Callback):
+        def on_train_batch_end(self, trainer, *args):
+            if trainer.global_step == 3:
+                raise RuntimeError("disk full (injected)")
+
+    build = run.build
+
+    def with_boom(c):
+        dm, model, trainer = build(c)
+        trainer.callbacks.append(Boom())
+        return dm, model, trainer
+
+    monkeypatch.setattr(run, "build", with_boom)
+    cfg = compose_cfg(["+experiment=wasb_padel", "trainer.max_epochs=1", "trainer.limit_train_batches=50",
+                       "trainer.limit_val_batches=1", "test=false", "callbacks.last_checkpoint.every_n_minutes=null",
+                       *small_detector(tiny_padel, tmp_path / "cache")], tmp_path / "run")
+    with pytest.raises(RuntimeError, match="injected"):
+        run.train(cfg)
+    assert _step_of(tmp_path / "run" / "checkpoints" / "last.ckpt") == 3
