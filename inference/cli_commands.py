@@ -19,8 +19,11 @@ def calibrate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate",
         help="calibrate the camera of a clip from its court_points.csv and write camera.yaml",
-        description="Normalised DLT + reprojection-error refinement from the clip's clicked court points "
-        "(≥ 6, not all on the ground). Prints the per-point residuals and writes camera.yaml atomically.",
+        description="Calibrates from the clip's clicked court points (≥ 6; floor points alone suffice: focal "
+        "length and pose from the floor homography, principal point at the image centre; with off-floor points "
+        "also a DLT start and a principal point under a prior at the centre), refined on the reprojection error. "
+        "Prints the per-point residuals, the camera's uncertainty and weak-geometry warnings, and writes "
+        "camera.yaml atomically. See docs/calibration.md.",
     )
     p.add_argument("clip", type=Path, help="clip folder (with clip.yaml and court_points.csv)")
     p.add_argument("--model", choices=["square", "pinhole"], default="square",

@@ -124,7 +124,9 @@ def _camera_run(ctx: Context) -> Outcome:
         result = calibrate_court(ctx.court, {n: xy * size for n, xy in zip(points.names, points.xy)},
                                  (clip.info.width, clip.info.height))
         clip.write_camera(result.camera)
-        return Outcome(note=f"calibrated from {len(result.names)} court points, RMS {result.rms_px:.2f} px")
+        warn = "".join(f"; warning: {w}" for w in result.warnings)
+        return Outcome(note=f"calibrated from {len(result.names)} court points ({result.method}), "
+                       f"RMS {result.rms_px:.2f} px{warn}")
     raise Skip("no calibration: pass --camera camera.yaml or --court-points court_points.csv (3D is skipped)")
 
 
