@@ -43,6 +43,7 @@ class PipelineConfig:
         device: ``cpu`` or ``cuda[:i]``.
         overwrite: replace files that the pipeline did not write (a backup is kept).
         progress: show progress bars.
+        auto_court: without court points or a camera, find the court automatically (its gate may refuse).
     """
 
     detector: str = "wasb"
@@ -56,6 +57,7 @@ class PipelineConfig:
     device: str = "cpu"
     overwrite: bool = False
     progress: bool = True
+    auto_court: bool = False  # no court points: fit the court's lines (``--court-points auto``)
 
     def __post_init__(self) -> None:
         if self.step < 1 or self.batch_size < 1:
@@ -127,11 +129,22 @@ def _camera_run(ctx: Context) -> Outcome:
         warn = "".join(f"; warning: {w}" for w in result.warnings)
         return Outcome(note=f"calibrated from {len(result.names)} court points ({result.method}), "
                        f"RMS {result.rms_px:.2f} px{warn}")
-    raise Skip("no calibration: pass --camera camera.yaml or --court-points court_points.csv (3D is skipped)")
+    if ctx.cfg.auto_court:
+        from inference.courtfit import fit_court
+
+        fit = fit_court(clip, ctx.court)
+        if not fit.accepted:
+            raise Skip(f"{fit.summary()}; click court points (rally3d label) and pass --court-points "
+                       "court_points.csv (3D is skipped)")
+        clip.write_camera(fit.camera)
+        return Outcome(note=fit.summary())
+    raise Skip("no calibration: pass --camera camera.yaml, --court-points court_points.csv or --court-points auto "
+               "(3D is skipped)")
 
 
 def _camera_outputs(ctx: Context) -> list[Path]:
-    return [] if ctx.given_camera() or not ctx.clip.court_points_path.is_file() else [ctx.clip.camera_path]
+    computed = ctx.clip.court_points_path.is_file() or ctx.cfg.auto_court
+    return [] if ctx.given_camera() or not computed else [ctx.clip.camera_path]
 
 
 # ------------------------------------------------------------------------------------------- detect
@@ -277,7 +290,8 @@ def build_stages() -> list[Stage]:
     video = lambda ctx: ctx.clip.video_path  # noqa: E731
     camera = _file("camera.yaml")
     return [
-        Stage("camera", _camera_inputs, lambda ctx: {"court": str(ctx.clip.court_path())}, _camera_outputs,
+        Stage("camera", _camera_inputs,
+              lambda ctx: {"court": str(ctx.clip.court_path()), "auto": ctx.cfg.auto_court}, _camera_outputs,
               _camera_run),
         Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx)},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
