@@ -31,6 +31,25 @@ from .tracker import TrackerConfig, TrackResult, track_candidates
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 SHIPPED = {"wasb": WEIGHTS_DIR / "wasb_padel.pth.tar"}
+#: the sport each shipped checkpoint was trained on
+SHIPPED_SPORT = {"wasb": "padel"}
+
+
+def shipped_weights(model: str, sport: str | None) -> tuple[Path | None, str]:
+    """The shipped checkpoint of ``model`` for ``sport`` and a sentence that says which model it is.
+
+    There is no tennis ball detector yet: a tennis clip gets the padel weights, and the sentence says so
+    (and how to train one), so nobody mistakes it for a tennis model.
+    """
+    path = SHIPPED.get(model)
+    if path is None:
+        return None, f"no shipped weights for {model!r}"
+    trained = SHIPPED_SPORT[model]
+    if sport and sport != trained:
+        return path, (f"no {sport} ball detector is shipped: using the {trained} {model.upper()} weights "
+                      f"({path.name}, trained on {trained} clips only; expect lower recall). Train one with "
+                      f"`python train.py +experiment={model}_{sport}` and pass it with --weights/--detector")
+    return path, f"{model.upper()} weights trained on {trained} ({path.name})"
 
 
 @dataclass

@@ -149,9 +149,9 @@ def _camera_outputs(ctx: Context) -> list[Path]:
 
 # ------------------------------------------------------------------------------------------- detect
 def _weights_path(ctx: Context) -> Path:
-    from inference.detection.detect import SHIPPED
+    from inference.detection.detect import shipped_weights
 
-    w = ctx.cfg.detector_weights or SHIPPED.get(ctx.cfg.detector)
+    w = ctx.cfg.detector_weights or shipped_weights(ctx.cfg.detector, ctx.clip.info.sport)[0]
     if w is None:
         raise StageError(f"no shipped weights for the {ctx.cfg.detector} detector: pass --detector CKPT")
     w = Path(w)
@@ -172,6 +172,11 @@ def _detect_run(ctx: Context) -> Outcome:
     write_ball_csv(ctx.detected_path, result.track)
     seen = int(np.sum(result.track.visibility > 0))
     note = f"ball in {seen}/{result.n_frames} frames"
+    if ctx.cfg.detector_weights is None:
+        from inference.detection.detect import SHIPPED_SPORT, shipped_weights
+
+        if SHIPPED_SPORT.get(ctx.cfg.detector) != ctx.clip.info.sport:
+            note += "; warning: " + shipped_weights(ctx.cfg.detector, ctx.clip.info.sport)[1]
     if result.truncated:
         return Outcome(result.n_frames, f"{note}; video truncated: {result.truncated}", partial=True)
     if seen == 0:

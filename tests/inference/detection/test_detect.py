@@ -79,3 +79,20 @@ def test_cli_detect_with_weights(clip, tmp_path, capsys):
 def test_cli_detect_missing_weights(clip, tmp_path, capsys):
     assert main(["detect", str(clip.root), "--weights", str(tmp_path / "nope.pth")]) == 1
     assert "never downloads weights" in capsys.readouterr().err
+
+
+def test_tennis_clip_says_plainly_which_detector_it_gets(tmp_path, capsys):
+    """No tennis detector is shipped: `rally3d detect` on a tennis clip names the padel weights it uses."""
+    from inference.clipio import ClipInfo, write_video
+    from inference.detection.detect import SHIPPED, shipped_weights
+
+    path, which = shipped_weights("wasb", "tennis")
+    assert path == SHIPPED["wasb"] and "no tennis ball detector" in which and "padel" in which
+    assert "wasb_tennis" in which  # and how to train one
+    assert "no " not in shipped_weights("wasb", "padel")[1]
+    clip = Clip.create(tmp_path / "tennis", ClipInfo(sport="tennis", fps=25.0, width=320, height=180,
+                                                     video="video.mp4", n_frames=3))
+    write_video(clip.video_path, [np.full((180, 320, 3), (60, 120, 60), np.uint8) for _ in range(3)], 25.0)
+    main(["detect", str(clip.root), "--out", str(tmp_path / "ball.csv")])
+    err = capsys.readouterr().err
+    assert "warning: no tennis ball detector is shipped" in err and "wasb_padel" in err
