@@ -27,6 +27,7 @@ from scipy.optimize import least_squares
 from inference.calibration import CalibrationError, CameraLayout, calibrate, camera_layout
 from inference.camera import Camera
 from inference.court import Court
+from inference.masks import apply_mask, clip_mask
 
 from .lines import LineEvidence, background, hough_lines, line_mask, working_scale
 from .model import CourtLines, court_lines
@@ -411,8 +412,9 @@ def fit_court(clip, court: Court, distortion: str = "auto", frames: list[int] | 
     frames spread over the clip (or the given frame indices)."""
     t0 = time.process_time()
     idx = frames if frames is not None else sample_frame_indices(clip.n_frames)
+    rects = clip_mask(clip)
     with clip.frames(cache_size=0) as src:
-        images = [src.read(i) for i in idx]
+        images = [apply_mask(src.read(i), rects) for i in idx]
     fit = fit_court_frames(images, court, distortion=distortion, frame_indices=idx)
     fit.cpu_seconds = time.process_time() - t0
     if fit.camera is not None:

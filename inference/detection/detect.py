@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from inference.clipio import BallTrack, Clip, FormatError
+from inference.masks import apply_mask, clip_mask
 from inference.models.checkpoint import load_weights
 from inference.models.fuse import fold_batchnorm
 from inference.models.registry import build_model
@@ -157,6 +158,7 @@ class BallDetectorRunner:
         lb = Letterbox(info.width, info.height, self.net_size[1], self.net_size[0])
         truncated: list[str] = []
         count = 0
+        rects = clip_mask(clip)
         with clip.frames(cache_size=0) as src:
             n = len(src)
             bar = tqdm(total=n, desc=f"detect {clip.root.name}", unit="frame", disable=not progress)
@@ -167,7 +169,7 @@ class BallDetectorRunner:
                     for frame in src.iter():
                         count += 1
                         bar.update()
-                        yield lb.warp(frame)
+                        yield lb.warp(apply_mask(frame, rects))
                 except FormatError as e:  # a truncated or damaged video: keep what was decoded
                     if not tolerate_truncation:
                         raise
