@@ -38,6 +38,9 @@ def calibrate(sub: argparse._SubParsersAction) -> None:
                    "check or correct in the labeler")
     p.add_argument("--frames", help="with --auto: frame indices to use, e.g. 0,50,100 (default: 9 spread over "
                    "the clip)")
+    p.add_argument("--drift", action="store_true",
+                   help="check the clip's camera.yaml against the video: the court lines' image shift every second "
+                   "and whether the camera drifts beyond the calibration's residuals (writes nothing)")
     p.set_defaults(func=run_calibrate)
 
 
@@ -94,6 +97,12 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     clip = Clip(args.clip)
     court = _clip_court(clip)
+    if args.drift:
+        from inference.courtfit.drift import measure_drift
+
+        report = measure_drift(clip, clip.read_camera(), court)
+        print(report.table())
+        return 0
     if args.auto:
         return run_auto_calibrate(args, clip, court)
     points = clip.read_court_points(known_names=court.point_names)

@@ -119,7 +119,7 @@ def _camera_run(ctx: Context) -> Outcome:
     clip = ctx.clip
     if ctx.given_camera():
         check_camera_size(clip.read_camera(), clip)
-        return Outcome(note="camera.yaml given")
+        return Outcome(note="camera.yaml given" + _drift_note(ctx))
     if clip.court_points_path.is_file():
         points = clip.read_court_points(known_names=ctx.court.point_names)
         size = np.array([clip.info.width, clip.info.height], dtype=float)
@@ -128,7 +128,7 @@ def _camera_run(ctx: Context) -> Outcome:
         clip.write_camera(result.camera)
         warn = "".join(f"; warning: {w}" for w in result.warnings)
         return Outcome(note=f"calibrated from {len(result.names)} court points ({result.method}), "
-                       f"RMS {result.rms_px:.2f} px{warn}")
+                       f"RMS {result.rms_px:.2f} px{warn}{_drift_note(ctx)}")
     if ctx.cfg.auto_court:
         from inference.courtfit import fit_court
 
@@ -137,9 +137,21 @@ def _camera_run(ctx: Context) -> Outcome:
             raise Skip(f"{fit.summary()}; click court points (rally3d label) and pass --court-points "
                        "court_points.csv (3D is skipped)")
         clip.write_camera(fit.camera)
-        return Outcome(note=fit.summary())
+        return Outcome(note=fit.summary() + _drift_note(ctx))
     raise Skip("no calibration: pass --camera camera.yaml, --court-points court_points.csv or --court-points auto "
                "(3D is skipped)")
+
+
+def _drift_note(ctx: Context) -> str:
+    """``; camera drift ...`` when the court moves in the video beyond the calibration (else "")."""
+    from inference.clipio import FormatError
+    from inference.courtfit.drift import measure_drift
+
+    try:
+        report = measure_drift(ctx.clip, ctx.clip.read_camera(), ctx.court)
+    except (FormatError, ValueError) as e:  # a drift check never sinks the calibration
+        return f"; drift not measured ({e})"
+    return f"; warning: {report.summary()}" if report.drifting else ""
 
 
 def _camera_outputs(ctx: Context) -> list[Path]:
