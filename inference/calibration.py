@@ -109,6 +109,21 @@ def _homogeneous(a: np.ndarray) -> np.ndarray:
     return np.hstack([a, np.ones((len(a), 1))])
 
 
+def _dlt_solve(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The (3, d+1) matrix M with ``dst ~ M [src; 1]`` from (N, d) ↔ (N, 2) pairs: Hartley-normalised DLT."""
+    T1, T2 = _normalising_transform(src), _normalising_transform(dst)
+    a = _homogeneous(src) @ T1.T
+    b = _homogeneous(dst) @ T2.T
+    k = a.shape[1]
+    A = np.zeros((2 * len(src), 3 * k))
+    A[0::2, 0:k] = a
+    A[0::2, 2 * k :] = -b[:, 0:1] * a
+    A[1::2, k : 2 * k] = a
+    A[1::2, 2 * k :] = -b[:, 1:2] * a
+    _, _, Vt = np.linalg.svd(A)
+    return np.linalg.inv(T2) @ Vt[-1].reshape(3, k) @ T1
+
+
 def dlt(world: np.ndarray, image: np.ndarray) -> np.ndarray:
     """Normalised direct linear transform.
 
@@ -118,38 +133,15 @@ def dlt(world: np.ndarray, image: np.ndarray) -> np.ndarray:
     Returns:
         (3, 4) projection matrix, sign chosen so the points have positive depth.
     """
-    T3 = _normalising_transform(world)
-    T2 = _normalising_transform(image)
-    Xn = _homogeneous(world) @ T3.T
-    xn = _homogeneous(image) @ T2.T
-    n = len(world)
-    A = np.zeros((2 * n, 12))
-    A[0::2, 0:4] = Xn
-    A[0::2, 8:12] = -xn[:, 0:1] * Xn
-    A[1::2, 4:8] = Xn
-    A[1::2, 8:12] = -xn[:, 1:2] * Xn
-    _, _, Vt = np.linalg.svd(A)
-    Pn = Vt[-1].reshape(3, 4)
-    P = np.linalg.inv(T2) @ Pn @ T3
-    depth = _homogeneous(world) @ P[2]
-    if np.median(depth) < 0:
+    P = _dlt_solve(world, image)
+    if np.median(_homogeneous(world) @ P[2]) < 0:
         P = -P
     return P / np.linalg.norm(P)
 
 
 def homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Normalised DLT homography ``dst ~ H src`` from (N ≥ 4, 2) point pairs; (3, 3), ‖H‖ = 1."""
-    T1, T2 = _normalising_transform(src), _normalising_transform(dst)
-    a = _homogeneous(src) @ T1.T
-    b = _homogeneous(dst) @ T2.T
-    n = len(src)
-    A = np.zeros((2 * n, 9))
-    A[0::2, 0:3] = a
-    A[0::2, 6:9] = -b[:, 0:1] * a
-    A[1::2, 3:6] = a
-    A[1::2, 6:9] = -b[:, 1:2] * a
-    _, _, Vt = np.linalg.svd(A)
-    H = np.linalg.inv(T2) @ Vt[-1].reshape(3, 3) @ T1
+    H = _dlt_solve(src, dst)
     return H / np.linalg.norm(H)
 
 
