@@ -91,9 +91,11 @@ class AutoFit:
 
     def summary(self) -> str:
         state = "accepted" if self.accepted else f"REJECTED ({self.reason})"
+        net = f"{100 * self.net_coverage:.0f} %" if np.isfinite(self.net_coverage) else "not in view"
         return (f"automatic court fit {state}: confidence {self.confidence:.2f}, coverage {100 * self.coverage:.0f} %, "
-                f"net {100 * self.net_coverage:.0f} %, line RMS {self.line_rms_px:.2f} px, lines {self.lines_supported[0]}+{self.lines_supported[1]}, "
-                f"margin {self.margin:.2f}, {self.cpu_seconds:.2f} s CPU")
+                f"net {net}, line RMS {self.line_rms_px:.2f} px, "
+                f"lines {self.lines_supported[0]}+{self.lines_supported[1]}, margin {self.margin:.2f}, "
+                f"{self.cpu_seconds:.2f} s CPU")
 
     def court_points(self, court: Court, margin_frac: float = 0.01) -> dict[str, np.ndarray]:
         """Named floor points of ``court`` that the fitted camera puts inside the image: name → (2,) px."""
