@@ -108,8 +108,13 @@ def main() -> None:
             m = run_row(sport, cams, names, args.seed + 100 + k, **kw)
             print(f"| {sport} | {label} | {m['n']} | {m['fails']} | {error_cells(m)} | {m['pp_max']:.0f} | "
                   f"{m['meets']}/{m['n'] - m['fails']} | {m['cpu_ms']:.0f} |", flush=True)
-    print(f"\nGoals: camera centre ≤ {GOALS['centre_m']} m, focal ≤ {GOALS['focal_pct']} %, RMS ≤ "
-          f"{GOALS['rms_px']} px; clicks off by 1–2 px; 1920×1080.")
+    print(goals_text("RMS", "clicks off by 1–2 px; 1920×1080"))
+
+
+def goals_text(rms_of: str, extra: str) -> str:
+    """The line under a table that states the goals."""
+    return (f"\nGoals: camera centre ≤ {GOALS['centre_m']} m, focal ≤ {GOALS['focal_pct']} %, {rms_of} ≤ "
+            f"{GOALS['rms_px']} px; {extra}.")
 
 
 if __name__ == "__main__":
