@@ -71,7 +71,10 @@ class Camera:
         dist: (5,) OpenCV distortion ``k1, k2, p1, p2, k3`` or None.
         rms_px: reprojection RMS of the calibration, pixels (None for ground truth).
         residuals_px: point name → reprojection error in pixels.
-        source: ``calibrated``, ``ground_truth`` ... free text.
+        source: ``calibrated``, ``auto`` (found by the automatic court fit), ``ground_truth`` ... free text.
+        meta: further camera.yaml keys, kept on a round trip: ``method``, ``centre_sigma_m``,
+            ``focal_sigma_px``, ``warnings`` (from the calibration) and ``auto`` (the automatic fit's
+            confidence and residuals); see docs/formats.md §11.
     """
 
     P: np.ndarray
@@ -83,6 +86,7 @@ class Camera:
     rms_px: float | None = None
     residuals_px: dict[str, float] = field(default_factory=dict)
     source: str = "calibrated"
+    meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.P = np.asarray(self.P, dtype=float)
@@ -181,6 +185,7 @@ class Camera:
         if self.residuals_px:
             d["points_used"] = list(self.residuals_px)
             d["residuals_px"] = {k: round(float(v), 4) for k, v in self.residuals_px.items()}
+        d.update({k: v for k, v in self.meta.items() if k not in d})
         return d
 
     def save(self, path: str | Path) -> Path:
@@ -213,10 +218,15 @@ class Camera:
                 rms_px=d.get("rms_px"),
                 residuals_px=dict(d.get("residuals_px") or {}),
                 source=str(d.get("source", "calibrated")),
+                meta={k: v for k, v in d.items() if k not in _CAMERA_KEYS},
                 **krt,
             )
         except (TypeError, ValueError) as e:
             raise FormatError(path, f"invalid camera: {e}", fix="re-run `rally3d calibrate <clip>`") from None
+
+
+_CAMERA_KEYS = {"image_size", "P", "K", "R", "t", "centre", "dist", "source", "rms_px", "points_used",
+                "residuals_px"}
 
 
 def distort_normalized(xn: np.ndarray, dist: np.ndarray) -> np.ndarray:

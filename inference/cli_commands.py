@@ -19,8 +19,11 @@ def calibrate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate",
         help="calibrate the camera of a clip from its court_points.csv and write camera.yaml",
-        description="Normalised DLT + reprojection-error refinement from the clip's clicked court points "
-        "(≥ 6, not all on the ground). Prints the per-point residuals and writes camera.yaml atomically.",
+        description="Calibrates from the clip's clicked court points (≥ 6; floor points alone suffice: focal "
+        "length and pose from the floor homography, principal point at the image centre; with off-floor points "
+        "also a DLT start and a principal point under a prior at the centre), refined on the reprojection error. "
+        "Prints the per-point residuals, the camera's uncertainty and weak-geometry warnings, and writes "
+        "camera.yaml atomically. See docs/calibration.md.",
     )
     p.add_argument("clip", type=Path, help="clip folder (with clip.yaml and court_points.csv)")
     p.add_argument("--model", choices=["square", "pinhole"], default="square",
@@ -28,7 +31,64 @@ def calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--distortion", type=int, choices=[0, 1, 2], default=0,
                    help="number of radial distortion coefficients to fit (default 0)")
     p.add_argument("--dry-run", action="store_true", help="print the result without writing camera.yaml")
+    p.add_argument("--auto", action="store_true",
+                   help="no clicks: find the court's painted lines in the video (median of a few frames) and fit "
+                   "the court to them; writes camera.yaml (source: auto) only when the fit passes its gate, and the "
+                   "fitted floor points (court_points.csv when there is none, else court_points_auto.csv) to "
+                   "check or correct in the labeler")
+    p.add_argument("--frames", help="with --auto: frame indices to use, e.g. 0,50,100 (default: 9 spread over "
+                   "the clip)")
+    p.add_argument("--drift", action="store_true",
+                   help="check the clip's camera.yaml against the video: the court lines' image shift every second "
+                   "and whether the camera drifts beyond the calibration's residuals (writes nothing)")
     p.set_defaults(func=run_calibrate)
+
+
+def run_auto_calibrate(args: argparse.Namespace, clip, court) -> int:
+    """``rally3d calibrate CLIP --auto``: the automatic court fit, its figures and its gate."""
+    import sys
+
+    from inference.clipio import CourtPoints, write_court_points_csv
+    from inference.courtfit import fit_court
+
+    frames = [int(v) for v in args.frames.split(",")] if args.frames else None
+    fit = fit_court(clip, court, frames=frames)
+    print(f"court {court.name}, frames {fit.frames}")
+    print(fit.summary())
+    if fit.camera is not None:
+        cam = fit.camera
+        print(f"camera centre (m): {np.array2string(cam.centre, precision=3)}   focal (px): {cam.K[0, 0]:.1f}")
+        _compare_gt(clip, cam)
+    if not fit.accepted:
+        print(f"not written: the fit is not reliable ({fit.reason or 'no court found'}). Click court points "
+              f"instead (rally3d label {clip.root}) and run rally3d calibrate.", file=sys.stderr)
+        return 1
+    if not args.dry_run:
+        print(f"wrote {clip.write_camera(fit.camera)}")
+        pts = fit.court_points(court)
+        size = np.array([clip.info.width, clip.info.height], dtype=float)
+        table = CourtPoints(list(pts), np.array(list(pts.values())).reshape(-1, 2) / size)
+        if clip.court_points_path.is_file():  # never replace a person's clicks
+            path = write_court_points_csv(clip.root / AUTO_POINTS, table)
+            print(f"wrote {path}: the fitted floor points (court_points.csv, your clicks, is left alone)")
+        else:
+            path = clip.write_court_points(table)
+            print(f"wrote {path}: the fitted floor points; check or drag them in `rally3d label {clip.root}` "
+                  "(the camera is recalibrated from them live)")
+    return 0
+
+
+#: where ``calibrate --auto`` writes the fitted points when the clip already has clicked court points
+AUTO_POINTS = "court_points_auto.csv"
+
+
+def _compare_gt(clip, cam) -> None:
+    gt = clip.root / "gt" / "camera.yaml"
+    if gt.is_file():
+        from inference.camera import Camera
+
+        err = float(np.linalg.norm(Camera.load(gt).centre - cam.centre))
+        print(f"camera centre error vs gt/camera.yaml: {err:.3f} m")
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -37,6 +97,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     clip = Clip(args.clip)
     court = _clip_court(clip)
+    if args.drift:
+        from inference.courtfit.drift import measure_drift
+
+        report = measure_drift(clip, clip.read_camera(), court)
+        print(report.table())
+        return 0
+    if args.auto:
+        return run_auto_calibrate(args, clip, court)
     points = clip.read_court_points(known_names=court.point_names)
     size = np.array([clip.info.width, clip.info.height], dtype=float)
     image_points = {n: xy * size for n, xy in zip(points.names, points.xy)}
@@ -49,12 +117,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
           f"focal (px): {cam.K[0, 0]:.1f}, {cam.K[1, 1]:.1f}")
     if result.suspect:
         print(f"warning: these points fit badly, check the clicks: {', '.join(result.suspect)}")
-    gt = clip.root / "gt" / "camera.yaml"
-    if gt.is_file():
-        from inference.camera import Camera
-
-        err = float(np.linalg.norm(Camera.load(gt).centre - cam.centre))
-        print(f"camera centre error vs gt/camera.yaml: {err:.3f} m")
+    _compare_gt(clip, cam)
     if not args.dry_run:
         path = clip.write_camera(cam)
         print(f"wrote {path}")

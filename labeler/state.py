@@ -619,7 +619,7 @@ class LabelSession:
 
     # ---------------------------------------------------------------------------- court points, camera
     def set_point(self, name: str, xy) -> None:
-        """Place court point ``name`` at normalised ``xy``; recalibrates live once ≥ 6 non-coplanar points exist."""
+        """Place court point ``name`` at normalised ``xy``; recalibrates live once ≥ 6 points (floor points suffice) exist."""
         if name not in self.court.points:
             raise KeyError(f"unknown court point {name!r} for {self.court.name}; valid: {', '.join(self.court.points)}")
         self.apply(f"court point {name}", [self._change("points", name, self._check_xy(xy))])

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -11,7 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="detect and track the ball of a clip with a detector network (writes ball.csv)",
         description="Streams the clip's frames through TrackNetV2, MonoTrack or WASB at full resolution "
         "(288×512 letterbox), turns heatmaps into candidates and tracks the ball (motion model, static-ball "
-        "and reflection rejection). Default: WASB with the shipped padel weights.",
+        "and reflection rejection). Default: WASB with the shipped padel weights (the only shipped ball "
+        "detector: a tennis clip gets them too, and the command says so).",
     )
     p.add_argument("clip", type=Path)
     p.add_argument("--model", choices=["wasb", "tracknetv2", "monotrack"],
@@ -33,10 +35,18 @@ def run(args: argparse.Namespace) -> int:
 
     from inference.clipio import Clip, write_ball_csv
 
-    from .detect import BallDetectorRunner
+    from .detect import SHIPPED_SPORT, BallDetectorRunner, shipped_weights
 
     clip = Clip(args.clip)
-    runner = BallDetectorRunner.from_weights(args.model, args.weights, trust=args.trust_checkpoint,
+    weights = args.weights
+    if weights is None:
+        model = args.model or "wasb"
+        weights, which = shipped_weights(model, clip.info.sport)
+        other_sport = SHIPPED_SPORT.get(model) != clip.info.sport
+        print(f"{'warning' if other_sport else 'detector'}: {which}", file=sys.stderr if other_sport else sys.stdout)
+    else:
+        print(f"detector: weights {weights}")
+    runner = BallDetectorRunner.from_weights(args.model, weights, trust=args.trust_checkpoint,
                                              step=args.step, batch_size=args.batch_size)
     result = runner.run(clip, progress=True)
     path = write_ball_csv(args.out or clip.ball_path, result.track)

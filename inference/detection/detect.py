@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from inference.clipio import BallTrack, Clip, FormatError
+from inference.masks import apply_mask, clip_mask
 from inference.models.checkpoint import load_detector
 from inference.models.fuse import fold_batchnorm
 
@@ -32,6 +33,25 @@ from .tracker import TrackerConfig, TrackResult, track_candidates
 log = logging.getLogger(__name__)
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 SHIPPED = {"wasb": WEIGHTS_DIR / "wasb_padel.pth.tar"}
+#: the sport each shipped checkpoint was trained on
+SHIPPED_SPORT = {"wasb": "padel"}
+
+
+def shipped_weights(model: str, sport: str | None) -> tuple[Path | None, str]:
+    """The shipped checkpoint of ``model`` for ``sport`` and a sentence that says which model it is.
+
+    There is no tennis ball detector yet: a tennis clip gets the padel weights, and the sentence says so
+    (and how to train one), so nobody mistakes it for a tennis model.
+    """
+    path = SHIPPED.get(model)
+    if path is None:
+        return None, f"no shipped weights for {model!r}"
+    trained = SHIPPED_SPORT[model]
+    if sport and sport != trained:
+        return path, (f"no {sport} ball detector is shipped: using the {trained} {model.upper()} weights "
+                      f"({path.name}, trained on {trained} clips only; expect lower recall). Train one with "
+                      f"`python train.py +experiment={model}_{sport}` and pass it with --weights/--detector")
+    return path, f"{model.upper()} weights trained on {trained} ({path.name})"
 
 
 @dataclass
@@ -145,6 +165,7 @@ class BallDetectorRunner:
         lb = Letterbox(info.width, info.height, self.net_size[1], self.net_size[0])
         truncated: list[str] = []
         count = 0
+        rects = clip_mask(clip)
         with clip.frames(cache_size=0) as src:
             n = len(src)
             bar = tqdm(total=n, desc=f"detect {clip.root.name}", unit="frame", disable=not progress)
@@ -155,7 +176,7 @@ class BallDetectorRunner:
                     for frame in src.iter():
                         count += 1
                         bar.update()
-                        yield lb.warp(frame)
+                        yield lb.warp(apply_mask(frame, rects))
                 except FormatError as e:  # a truncated or damaged video: keep what was decoded
                     if not tolerate_truncation:
                         raise

@@ -22,7 +22,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a video file, a clip folder (clip.yaml) or a dataset folder (manifest.yaml)")
     p.add_argument("--court", help="padel or tennis (or a court YAML); needed for a video, read from clip.yaml otherwise")
     p.add_argument("--camera", type=Path, help="camera.yaml of this video's camera")
-    p.add_argument("--court-points", type=Path, help="court_points.csv clicked on this video (calibrated here)")
+    p.add_argument("--court-points", help="court_points.csv clicked on this video (calibrated here; floor points "
+                   "suffice), or 'auto': find the court's lines automatically (refused when unsure)")
+    p.add_argument("--start", type=float, help="seconds: process the video from here (a clip cut from a long match "
+                   "is written into --out)")
+    p.add_argument("--end", type=float, help="seconds: process the video up to here")
     p.add_argument("--out", type=Path, help="output clip folder (a video: default runs/infer/<stem>; a clip: in "
                    "place); with several inputs, the parent folder of one clip folder each")
     p.add_argument("--detector", type=Path, help="ball-detector checkpoint (default: the shipped weights)")
@@ -59,7 +63,13 @@ def _config(args: argparse.Namespace):
                           trust_checkpoint=args.trust_checkpoint, step=args.step,
                           batch_size=args.batch_size, events=args.events, pose=args.pose,
                           pose_model=args.pose_model, method=args.method, device=args.device,
-                          overwrite=args.overwrite, progress=not args.no_progress)
+                          overwrite=args.overwrite, progress=not args.no_progress,
+                          auto_court=args.court_points == "auto")
+
+
+def _court_points(args: argparse.Namespace) -> Path | None:
+    """The --court-points file (None for ``auto`` or none)."""
+    return None if args.court_points in (None, "auto") else Path(args.court_points)
 
 
 def _expand(args: argparse.Namespace) -> list[tuple[Path, Path | None]]:
@@ -90,10 +100,12 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"unknown stages {unknown}; choose from {', '.join(STAGE_NAMES)}")
     if len(items) == 1:
         return _run_one(items[0], cfg, args)
+    if args.start is not None or args.end is not None:
+        raise ValueError("--start/--end cut one video; give a single input")
     from .engine import predict_clips
 
     devices = int(args.devices) if str(args.devices).isdigit() else args.devices
-    results = predict_clips(items, cfg, court=args.court, camera=args.camera, court_points=args.court_points,
+    results = predict_clips(items, cfg, court=args.court, camera=args.camera, court_points=_court_points(args),
                             accelerator=args.accelerator, devices=devices, strategy=args.strategy)
     failed = 0
     for r in results:
@@ -107,12 +119,12 @@ def run(args: argparse.Namespace) -> int:
 def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> int:
     from inference.clipio import Clip
 
-    from .prepare import prepare
+    from .prepare import Cut, prepare
     from .run import run_pipeline
     from .score import score
 
     source, out = item
-    prepared = prepare(source, out, args.court, args.camera, args.court_points)
+    prepared = prepare(source, out, args.court, args.camera, _court_points(args), Cut(args.start, args.end))
     clip = prepared.clip
     print(f"rally3d infer: {source} → {clip.root} ({clip.info.width}×{clip.info.height}, {clip.info.fps:g} fps, "
           f"{clip.n_frames} frames)")

@@ -8,6 +8,10 @@
   reference the results are scored against.
 
 ``--camera`` and ``--court-points`` files are copied in after checking that they fit the video.
+
+With ``--start``/``--end`` (seconds), the stretch of a long video is re-encoded into the new clip folder's
+``video.mp4`` (H.264, CRF 18) and ``clip.yaml`` records where it came from (``cut:``); a re-run with the same
+stretch reuses it.
 """
 from __future__ import annotations
 
@@ -52,10 +56,38 @@ def probe_video(path: Path) -> tuple[int, int, float, int]:
         return src.width, src.height, float(src.fps), len(src)
 
 
+@dataclass(frozen=True)
+class Cut:
+    """A stretch of a long video, in seconds: ``[start_s, end_s)`` (None: from the start / to the end)."""
+
+    start_s: float | None = None
+    end_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.start_s is not None and self.start_s < 0:
+            raise ValueError(f"--start must be ≥ 0 seconds, got {self.start_s}")
+        if self.start_s is not None and self.end_s is not None and self.end_s <= self.start_s:
+            raise ValueError(f"--end ({self.end_s} s) must come after --start ({self.start_s} s)")
+
+    @property
+    def active(self) -> bool:
+        return self.start_s is not None or self.end_s is not None
+
+    def frames(self, fps: float, n: int) -> tuple[int, int]:
+        """First frame and the frame after the last, clamped to the video's ``n`` frames."""
+        first = int(round((self.start_s or 0.0) * fps))
+        stop = n if self.end_s is None else min(n, int(round(self.end_s * fps)))
+        if first >= stop:
+            raise ValueError(f"--start {self.start_s} s is at or past the end of the video ({n / fps:.1f} s)")
+        return first, stop
+
+
 def prepare(source: Path, out: Path | None, court: str | None, camera: Path | None = None,
-            court_points: Path | None = None) -> Prepared:
+            court_points: Path | None = None, cut: Cut | None = None) -> Prepared:
     """Create or reuse the clip folder for ``source`` (see the module docstring)."""
     source = Path(source)
+    if cut is not None and cut.active:
+        return _prepare_cut(source, out, court, camera, court_points, cut)
     if is_clip_folder(source):
         src_clip = Clip(source)
         info = src_clip.info
@@ -87,6 +119,52 @@ def prepare(source: Path, out: Path | None, court: str | None, camera: Path | No
     if court_points is not None:
         _install_court_points(clip, Path(court_points))
     return Prepared(clip, source, reference)
+
+
+def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path | None,
+                 court_points: Path | None, cut: Cut) -> Prepared:
+    """A new clip folder holding ``[start, end)`` of the video (re-encoded as ``video.mp4``, H.264)."""
+    from inference.clipio import write_video
+
+    if is_clip_folder(source):
+        src_info = Clip(source).info
+        video, court = Clip(source).video_path, court or src_info.sport
+    else:
+        video = source
+    if not court:
+        raise ValueError(f"{source}: a video needs --court (padel or tennis, or a court YAML path)")
+    width, height, fps, n = probe_video(video)
+    first, stop = cut.frames(fps, n)
+    tag = f"_{first}-{stop}"
+    out = Path(out) if out is not None else Path("runs/infer") / (Path(video).stem + tag)
+    if is_clip_folder(source) and out.resolve() == source.resolve():
+        raise ValueError(f"{source}: --start/--end write a new clip folder; pass --out elsewhere")
+    record = {"video": os.path.relpath(Path(video).resolve(), out.resolve()), "start_s": cut.start_s,
+              "end_s": cut.end_s, "first_frame": first, "stop_frame": stop}
+    clip_yaml = out / "clip.yaml"
+    if clip_yaml.is_file() and Clip(out).info.extra.get("cut") == record and (out / "video.mp4").is_file():
+        clip = Clip(out)  # the same cut as before: resume
+    else:
+        if clip_yaml.is_file() and "cut" not in Clip(out).info.extra:
+            raise FileExistsError(f"{clip_yaml} belongs to another clip; choose another --out")
+        out.mkdir(parents=True, exist_ok=True)
+        with FrameSource.open(video, cache_size=0) as src:
+            written = write_video(out / "video.mp4", src.iter(first, stop), fps, fourcc="h264", crf=18)
+        info = ClipInfo(sport=Path(court).stem if court.endswith(".yaml") else court, fps=fps, width=width,
+                        height=height, video="video.mp4", n_frames=written,
+                        source=f"{video} from {first / fps:.2f} s (frame {first})", extra={"cut": record})
+        if court.endswith(".yaml"):
+            info.court = os.path.relpath(Path(court).resolve(), out.resolve())
+        clip = Clip.create(out, info, exist_ok=True)
+    if is_clip_folder(source) and camera is None and (source / "camera.yaml").is_file():
+        camera = source / "camera.yaml"  # the camera does not change along a video; clicked points neither
+    if is_clip_folder(source) and court_points is None and (source / "court_points.csv").is_file():
+        court_points = source / "court_points.csv"
+    if camera is not None:
+        _install_camera(clip, Path(camera))
+    if court_points is not None:
+        _install_court_points(clip, Path(court_points))
+    return Prepared(clip, source, None)
 
 
 def _new_clip(out: Path, info: ClipInfo, video: Path) -> Clip:

@@ -44,6 +44,7 @@ class PipelineConfig:
         device: ``cpu`` or ``cuda[:i]``.
         overwrite: replace files that the pipeline did not write (a backup is kept).
         progress: show progress bars.
+        auto_court: without court points or a camera, find the court automatically (its gate may refuse).
     """
 
     detector: str = "wasb"
@@ -58,6 +59,7 @@ class PipelineConfig:
     device: str = "cpu"
     overwrite: bool = False
     progress: bool = True
+    auto_court: bool = False  # no court points: fit the court's lines (``--court-points auto``)
 
     def __post_init__(self) -> None:
         if self.step < 1 or self.batch_size < 1:
@@ -119,26 +121,51 @@ def _camera_run(ctx: Context) -> Outcome:
     clip = ctx.clip
     if ctx.given_camera():
         check_camera_size(clip.read_camera(), clip)
-        return Outcome(note="camera.yaml given")
+        return Outcome(note="camera.yaml given" + _drift_note(ctx))
     if clip.court_points_path.is_file():
         points = clip.read_court_points(known_names=ctx.court.point_names)
         size = np.array([clip.info.width, clip.info.height], dtype=float)
         result = calibrate_court(ctx.court, {n: xy * size for n, xy in zip(points.names, points.xy)},
                                  (clip.info.width, clip.info.height))
         clip.write_camera(result.camera)
-        return Outcome(note=f"calibrated from {len(result.names)} court points, RMS {result.rms_px:.2f} px")
-    raise Skip("no calibration: pass --camera camera.yaml or --court-points court_points.csv (3D is skipped)")
+        warn = "".join(f"; warning: {w}" for w in result.warnings)
+        return Outcome(note=f"calibrated from {len(result.names)} court points ({result.method}), "
+                       f"RMS {result.rms_px:.2f} px{warn}{_drift_note(ctx)}")
+    if ctx.cfg.auto_court:
+        from inference.courtfit import fit_court
+
+        fit = fit_court(clip, ctx.court)
+        if not fit.accepted:
+            raise Skip(f"{fit.summary()}; click court points (rally3d label) and pass --court-points "
+                       "court_points.csv (3D is skipped)")
+        clip.write_camera(fit.camera)
+        return Outcome(note=fit.summary() + _drift_note(ctx))
+    raise Skip("no calibration: pass --camera camera.yaml, --court-points court_points.csv or --court-points auto "
+               "(3D is skipped)")
+
+
+def _drift_note(ctx: Context) -> str:
+    """``; camera drift ...`` when the court moves in the video beyond the calibration (else "")."""
+    from inference.clipio import FormatError
+    from inference.courtfit.drift import measure_drift
+
+    try:
+        report = measure_drift(ctx.clip, ctx.clip.read_camera(), ctx.court)
+    except (FormatError, ValueError) as e:  # a drift check never sinks the calibration
+        return f"; drift not measured ({e})"
+    return f"; warning: {report.summary()}" if report.drifting else ""
 
 
 def _camera_outputs(ctx: Context) -> list[Path]:
-    return [] if ctx.given_camera() or not ctx.clip.court_points_path.is_file() else [ctx.clip.camera_path]
+    computed = ctx.clip.court_points_path.is_file() or ctx.cfg.auto_court
+    return [] if ctx.given_camera() or not computed else [ctx.clip.camera_path]
 
 
 # ------------------------------------------------------------------------------------------- detect
 def _weights_path(ctx: Context) -> Path:
-    from inference.detection.detect import SHIPPED
+    from inference.detection.detect import shipped_weights
 
-    w = ctx.cfg.detector_weights or SHIPPED.get(ctx.cfg.detector)
+    w = ctx.cfg.detector_weights or shipped_weights(ctx.cfg.detector, ctx.clip.info.sport)[0]
     if w is None:
         raise StageError(f"no shipped weights for the {ctx.cfg.detector} detector: pass --detector CKPT")
     w = Path(w)
@@ -160,6 +187,11 @@ def _detect_run(ctx: Context) -> Outcome:
     write_ball_csv(ctx.detected_path, result.track)
     seen = int(np.sum(result.track.visibility > 0))
     note = f"ball in {seen}/{result.n_frames} frames"
+    if ctx.cfg.detector_weights is None:
+        from inference.detection.detect import SHIPPED_SPORT, shipped_weights
+
+        if SHIPPED_SPORT.get(ctx.cfg.detector) != ctx.clip.info.sport:
+            note += "; warning: " + shipped_weights(ctx.cfg.detector, ctx.clip.info.sport)[1]
     if result.truncated:
         return Outcome(result.n_frames, f"{note}; video truncated: {result.truncated}", partial=True)
     if seen == 0:
@@ -278,7 +310,8 @@ def build_stages() -> list[Stage]:
     video = lambda ctx: ctx.clip.video_path  # noqa: E731
     camera = _file("camera.yaml")
     return [
-        Stage("camera", _camera_inputs, lambda ctx: {"court": str(ctx.clip.court_path())}, _camera_outputs,
+        Stage("camera", _camera_inputs,
+              lambda ctx: {"court": str(ctx.clip.court_path()), "auto": ctx.cfg.auto_court}, _camera_outputs,
               _camera_run),
         Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx)},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},

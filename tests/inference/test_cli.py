@@ -62,15 +62,27 @@ def test_calibrate_dry_run_writes_nothing(sample, capsys):
     assert not (sample / "camera.yaml").exists()
 
 
-def test_calibrate_coplanar_points_say_what_to_click(sample, capsys):
+def test_calibrate_from_floor_points_only(sample, capsys):
     lines = (sample / "court_points.csv").read_text().splitlines()
     ground = [lines[0]] + [ln for ln in lines[1:] if ln.split(",")[0] in {
         "far_left", "far_right", "near_service_left", "near_service_right", "far_service_center",
         "net_left", "net_right", "net_center"}]
     (sample / "court_points.csv").write_text("\n".join(ground) + "\n")
+    assert main(["calibrate", str(sample)]) == 0
+    out = capsys.readouterr().out
+    assert "plane calibration" in out and "camera centre ±" in out
+    cam = Camera.load(sample / "camera.yaml")
+    assert cam.meta["method"] == "plane" and len(cam.meta["centre_sigma_m"]) == 3
+    assert np.linalg.norm(cam.centre - Camera.load(sample / "gt" / "camera.yaml").centre) < 0.3
+
+
+def test_calibrate_collinear_points_say_what_to_click(sample, capsys):
+    (sample / "court_points.csv").write_text("name,x,y\n" + "".join(
+        f"{n},0.{k + 1},0.5\n" for k, n in enumerate(["near_left", "near_service_left", "net_left",
+                                                     "far_service_left", "far_left", "step_near_left_end_ground"])))
     assert main(["calibrate", str(sample)]) == 1
     err = capsys.readouterr().err
-    assert "all lie on one plane" in err and "net_post_left_top" in err
+    assert "lie on one line" in err and "net_post_left_top" in err
     assert not (sample / "camera.yaml").exists()
 
 

@@ -3,6 +3,9 @@
 Presets:
     ``padel_installed`` — the usual fixed padel camera, behind and above the near back glass.
     ``tennis_broadcast`` — the broadcast view from high behind the near baseline.
+    ``padel_broadcast`` — a broadcast padel view: high (8 m) and well behind the near glass (8 m), the whole
+    court in view (render it at 1080p with ``SynthConfig(width=1920, height=1080)`` or ``--size 1920x1080``).
+    ``tennis_high`` — a higher, farther tennis view (14 m up, 18 m behind the baseline).
 
 Example:
     >>> spec = CameraSpec.preset("padel_installed").randomised(np.random.default_rng(0))
@@ -53,6 +56,8 @@ class CameraSpec:
         presets = {
             "padel_installed": CameraSpec(eye=(5.0, -3.0, 6.0), target=(5.0, 9.5, 0.0), near_y=2.5),
             "tennis_broadcast": CameraSpec(eye=(5.485, -14.0, 9.0), target=(5.485, 10.5, 0.0), margin=0.08),
+            "padel_broadcast": CameraSpec(eye=(5.0, -8.0, 8.0), target=(5.0, 9.0, 0.0), margin=0.05),
+            "tennis_high": CameraSpec(eye=(5.485, -18.0, 14.0), target=(5.485, 11.0, 0.0), margin=0.06),
         }
         if name not in presets:
             raise KeyError(f"unknown camera preset {name!r}; presets: {sorted(presets)}")

@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clips", type=int, default=20, help="number of clips (default 20)")
     p.add_argument("--out", type=Path, required=True, help="dataset folder to write")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--camera", help="camera preset (padel_installed, tennis_broadcast; default per sport)")
+    p.add_argument("--camera", help="camera preset (padel_installed, padel_broadcast, tennis_broadcast, tennis_high; "
+                   "default per sport)")
     p.add_argument("--fixed-camera", action="store_true", help="do not randomise the camera preset")
     p.add_argument("--plain", action="store_true", help="clean look: no noise, no JPEG, neutral colours")
     p.add_argument("--fps", type=float, help="fix the frame rate (default: drawn from 25, 30, 50, 60)")

@@ -15,9 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from inference.camera import Camera
 from inference.clipio import BallTrack, Clip, ClipInfo, Manifest, ManifestEntry, PlayerTracks, write_video
 from inference.clipio.frames import write_frames_folder
-from inference.court import load_court
+from inference.court import Court, load_court
 from inference.skeleton import COCO17
 
 from .bodies import PlayerPose, articulate
@@ -132,6 +133,46 @@ def _trim(rally: Rally, max_frames: int | None) -> Rally:
     return replace(rally, n_frames=max_frames, contacts=[c for c in rally.contacts if c.t < t_end])
 
 
+@dataclass
+class SynthScene:
+    """Everything one seed fixes before rendering: court, camera, look, rally, bodies, renderer.
+
+    Example:
+        >>> scene = SynthScene.build(3, SynthConfig(sport="tennis", camera="tennis_high"))
+        >>> image = scene.frame(0)        # (H, W, 3) uint8 RGB, exactly as in the clip's video
+    """
+
+    court: Court
+    spec: CameraSpec
+    camera: Camera
+    look: Appearance
+    rally: Rally
+    poses: list[PlayerPose]
+    renderer: CourtRenderer
+    r_points: np.random.Generator
+
+    @classmethod
+    def build(cls, seed: int, config: SynthConfig) -> SynthScene:
+        court = load_court(config.court or config.sport)
+        seq = np.random.SeedSequence(seed)
+        r_cam, r_look, r_rally, r_body, r_points = (np.random.default_rng(s) for s in seq.spawn(5))
+        spec = camera_spec(config, r_cam)
+        camera = spec.build(court)
+        look = Appearance.sample(r_look, config.sport) if config.randomise_look else Appearance.plain(config.sport)
+        if config.look_shift:
+            look = look.shifted(np.random.default_rng([seed, 7]))  # its own stream: the default draws are unchanged
+        rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport,
+                                     config=default_config(config.sport)), config.max_frames)
+        poses = [articulate(p, spec.fps, r_body, sport=config.sport) for p in rally.players]
+        renderer = CourtRenderer(court, camera, look, seed=int(seq.generate_state(1)[0]))
+        return cls(court, spec, camera, look, rally, poses, renderer, r_points)
+
+    def frame(self, i: int) -> tuple[np.ndarray, FrameInfo]:
+        """Frame ``i`` (ball, players and inactive balls included) and its ground-truth info."""
+        samples = ball_exposure(self.rally.ball, i, self.spec.fps, self.look.shutter)
+        return self.renderer.render(i, samples, self.poses, self.rally.inactive_balls)
+
+
 def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
                   progress: Callable[[int, int], None] | None = None) -> ClipSummary:
     """Simulate and render one clip into the folder ``out`` (created; existing files are replaced).
@@ -142,18 +183,8 @@ def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
         progress: called as ``progress(frames_done, n_frames)`` while rendering.
     """
     config = config or SynthConfig()
-    court = load_court(config.court or config.sport)
-    seq = np.random.SeedSequence(seed)
-    r_cam, r_look, r_rally, r_body, r_points = (np.random.default_rng(s) for s in seq.spawn(5))
-    spec = camera_spec(config, r_cam)
-    camera = spec.build(court)
-    look = Appearance.sample(r_look, config.sport) if config.randomise_look else Appearance.plain(config.sport)
-    if config.look_shift:
-        look = look.shifted(np.random.default_rng([seed, 7]))  # its own stream: the default draws are unchanged
-    rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport,
-                                 config=default_config(config.sport)), config.max_frames)
-    poses = [articulate(p, spec.fps, r_body, sport=config.sport) for p in rally.players]
-    renderer = CourtRenderer(court, camera, look, seed=int(seq.generate_state(1)[0]))
+    scene = SynthScene.build(seed, config)
+    court, spec, camera, rally, poses = scene.court, scene.spec, scene.camera, scene.rally, scene.poses
     size = camera.image_size
 
     clip = Clip.create(out, ClipInfo(
@@ -167,8 +198,7 @@ def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
 
     def frames():
         for i in range(rally.n_frames):
-            samples = ball_exposure(rally.ball, i, spec.fps, look.shutter)
-            image, info = renderer.render(i, samples, poses, rally.inactive_balls)
+            image, info = scene.frame(i)
             infos.append(info)
             if progress:
                 progress(i + 1, rally.n_frames)
@@ -184,7 +214,7 @@ def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
     events = event_table(rally)
     clip.write_events(events)
     clip.write_events(events, gt=True)
-    clip.write_court_points(court_point_table(court, camera, r_points, config.click_noise_px))
+    clip.write_court_points(court_point_table(court, camera, scene.r_points, config.click_noise_px))
     clip.write_camera(camera, gt=True)
     clip.write_ball_3d(ball_3d_table(rally), gt=True)
     clip.write_players(player_tracks(infos, poses, size), gt=True)

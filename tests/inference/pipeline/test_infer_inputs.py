@@ -118,3 +118,26 @@ def test_several_clips_go_through_lightnings_predict_loop(tmp_path, capsys):
     for name in ("a", "b"):
         assert (tmp_path / "out" / name / "camera.yaml").is_file()
         assert (tmp_path / "out" / name / ".rally3d" / "pipeline.json").is_file()
+
+
+def test_start_end_cut_a_stretch_of_a_long_video(tmp_path, capsys):
+    from inference.clipio.frames import FrameSource
+
+    out = tmp_path / "cut"
+    args = ["infer", str(SAMPLE / "video.mp4"), "--court", "padel", "--court-points",
+            str(SAMPLE / "court_points.csv"), "--start", "2", "--end", "3", "--out", str(out), "--no-progress",
+            "--pose", "none", "--only", "camera"]
+    assert main(args) == 0, capsys.readouterr()
+    clip = Clip(out)
+    assert clip.n_frames == 30 and clip.info.extra["cut"]["first_frame"] == 60
+    with FrameSource.open(SAMPLE / "video.mp4") as src, FrameSource.open(clip.video_path) as cut:
+        same = np.abs(cut.read(0).astype(float) - src.read(60)).mean()
+        other = np.abs(cut.read(0).astype(float) - src.read(0)).mean()
+    assert same < 3.0 and same < other
+    assert (out / "camera.yaml").is_file()
+    mtime = clip.video_path.stat().st_mtime_ns
+    assert main(args) == 0  # the same stretch again: resumed, not re-cut
+    assert clip.video_path.stat().st_mtime_ns == mtime
+    assert main(["infer", str(SAMPLE / "video.mp4"), "--court", "padel", "--start", "3", "--end", "2",
+                 "--out", str(tmp_path / "bad")]) == 1
+    assert "must come after --start" in capsys.readouterr().err

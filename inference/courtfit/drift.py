@@ -1,0 +1,152 @@
+"""Camera drift: does the court stay where the calibration puts it, all through the clip?
+
+Broadcast "fixed" cameras creep (10–15 px over a rally is common). Every ``every_s`` seconds a frame's painted
+lines are matched to the calibrated camera's projected court lines by the image shift that puts the
+projected lines on the brightest line centres (whole working pixels within ±``max_shift_px``, then a
+quarter-pixel grid). The report gives the shift per sampled frame and flags drift when
+the shifts spread more than the calibration can explain.
+
+Example:
+    >>> report = measure_drift(Clip("clip"), camera, load_court("padel"))
+    >>> report.max_drift_px, report.drifting, report.table()
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from inference.camera import Camera
+from inference.court import Court
+
+from .lines import LineEvidence, line_channel, line_mask, working_scale
+from .model import court_lines
+
+#: drift below this (px) is never reported, whatever the calibration's RMS
+MIN_DRIFT_PX = 3.0
+HIT_PX = 1.5  # working px
+
+
+@dataclass
+class DriftReport:
+    """Per sampled frame, the image shift (full-resolution px) that best aligns the court lines.
+
+    Attributes:
+        frames: (F,) frame indices; shifts: (F, 2) dx, dy; support: (F,) share of the projected lines on
+            line pixels after the shift (low: the court is hidden, a cut, a close-up).
+        threshold_px: drift beyond this is reported (max of :data:`MIN_DRIFT_PX` and 2 × the calibration RMS).
+    """
+
+    frames: list[int]
+    shifts: np.ndarray
+    support: np.ndarray
+    threshold_px: float
+    fps: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(F,) frames where the court was found well enough to measure a shift."""
+        return self.support >= 0.3
+
+    @property
+    def max_drift_px(self) -> float:
+        """The largest distance between the shifts of two valid frames (px)."""
+        s = self.shifts[self.valid]
+        if len(s) < 2:
+            return 0.0
+        return float(np.max(np.linalg.norm(s[:, None] - s[None], axis=2)))
+
+    @property
+    def drifting(self) -> bool:
+        return self.max_drift_px > self.threshold_px
+
+    def summary(self) -> str:
+        v = self.valid
+        text = (f"camera drift: {self.max_drift_px:.1f} px over {len(self.frames)} sampled frames "
+                f"({int(v.sum())} with the court in view)")
+        if self.drifting:
+            text += (f" — beyond the calibration's {self.threshold_px:.1f} px: the camera moves during the clip; "
+                     "3D positions far from the calibrated frames are off by about as much")
+        if (~v).any():
+            text += f"; court not found at frames {[f for f, ok in zip(self.frames, v) if not ok]} (a cut or close-up?)"
+        return text
+
+    def table(self) -> str:
+        lines = ["frame   time_s    dx_px    dy_px  support"]
+        for f, (dx, dy), s in zip(self.frames, self.shifts, self.support):
+            lines.append(f"{f:5d}  {f / self.fps:7.2f}  {dx:7.2f}  {dy:7.2f}  {s:7.2f}")
+        return "\n".join(lines + [self.summary()])
+
+
+def _samples(cam: Camera, court: Court, step_m: float = 0.1) -> np.ndarray:
+    """(P, 2) full-resolution pixels of the court's floor lines inside the image."""
+    model = court_lines(court)
+    pts, _ = model.samples(step_m)
+    px = cam.project(np.concatenate([pts, np.zeros((len(pts), 1))], axis=1))
+    w, h = cam.image_size
+    return px[np.isfinite(px).all(1) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)]
+
+
+def _ridge_map(L: np.ndarray) -> np.ndarray:
+    """(h, w) float32 line strength: brightness above the local background, smoothed (peaks at line centres)."""
+    import cv2
+
+    f = L.astype(np.float32)
+    ridge = np.maximum(f - cv2.blur(f, (15, 15)), 0)
+    return cv2.GaussianBlur(ridge, (0, 0), 1.0)
+
+
+def frame_shift(frame: np.ndarray, samples: np.ndarray, max_shift_px: float = 24.0) -> tuple[np.ndarray, float]:
+    """The (2,) shift (full px) that moves the projected court ``samples`` (P, 2) onto ``frame``'s painted
+    lines, and the share of samples on line pixels after the shift.
+
+    The line strength summed over the shifted samples is maximised on whole working pixels within
+    ±``max_shift_px``, then on a quarter-pixel grid around the best (bilinear sampling)."""
+    import cv2
+
+    h, w = frame.shape[:2]
+    scale = working_scale((w, h))
+    L = line_channel(frame, scale)
+    ridge = _ridge_map(L)
+    hh, ww = ridge.shape
+    p = ((samples + 0.5) * scale - 0.5).astype(np.float32)
+
+    def strength(shifts: np.ndarray) -> np.ndarray:
+        q = p[None] + shifts[:, None].astype(np.float32)  # (S, P, 2)
+        v = cv2.remap(ridge, q[..., 0], q[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        return v.mean(axis=1)
+
+    r = int(np.ceil(max_shift_px * scale))
+    grid = np.stack(np.meshgrid(np.arange(-r, r + 1), np.arange(-r, r + 1)), -1).reshape(-1, 2).astype(float)
+    best = grid[int(np.argmax(strength(grid)))]
+    fine = best + np.stack(np.meshgrid(np.arange(-1, 1.01, 0.25), np.arange(-1, 1.01, 0.25)), -1).reshape(-1, 2)
+    best = fine[int(np.argmax(strength(fine)))]
+    ev = LineEvidence.from_mask(line_mask(L), scale, (w, h))
+    q = np.round(p + best).astype(int)
+    ok = (q[:, 0] >= 0) & (q[:, 0] < ww) & (q[:, 1] >= 0) & (q[:, 1] < hh)
+    hits = float(np.sum(ev.distance[q[ok, 1], q[ok, 0]] <= HIT_PX))
+    return best / scale, hits / max(len(samples), 1)
+
+
+def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
+                  max_shift_px: float = 24.0) -> DriftReport:
+    """Sample a frame every ``every_s`` seconds of ``clip`` (:class:`inference.clipio.Clip`) and measure its
+    shift against ``camera``'s projected court lines (see the module docstring)."""
+    from inference.masks import apply_mask, clip_mask
+
+    fps = clip.info.fps
+    n = clip.n_frames
+    idx = list(range(0, n, max(1, int(round(every_s * fps)))))
+    if idx[-1] != n - 1:
+        idx.append(n - 1)
+    samples = _samples(camera, court)
+    rects = clip_mask(clip)
+    shifts, support = [], []
+    with clip.frames(cache_size=0) as src:
+        for i in idx:
+            s, sup = frame_shift(apply_mask(src.read(i), rects), samples, max_shift_px)
+            shifts.append(s)
+            support.append(sup)
+    rms = camera.rms_px if camera.rms_px is not None else 0.0
+    return DriftReport(idx, np.array(shifts).reshape(-1, 2), np.array(support), max(MIN_DRIFT_PX, 2 * rms), fps)

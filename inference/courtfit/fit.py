@@ -1,0 +1,424 @@
+"""Automatic court fit: line evidence → line correspondences → camera refined on line distances → gate.
+
+1. :mod:`.lines`: the median of a few frames, its line pixels and straight lines;
+2. :mod:`.search`: ordered correspondences between image lines and the court's painted lines, each a floor
+   homography, scored on the line pixels;
+3. the best few: a camera from the homography's crossing points by the coplanar calibration
+   (:func:`inference.calibration.calibrate`: Zhang's constraints, then f, R, t), refined on the distances of
+   line pixels to the projected court lines (robust least squares; radial distortion k1 kept when it
+   explains the lines clearly better), rescored;
+4. the gate: the fit is *accepted* only when enough of the visible court lines are found on line pixels
+   (coverage), the pixels sit close to the lines (line RMS), lines of both directions are supported, the
+   runner-up explains clearly less (margin) and the camera is plausible. A rejected fit says why; nothing
+   downstream uses it silently.
+
+Example:
+    >>> fit = fit_court(Clip("runs/clip"), load_court("padel"))
+    >>> fit.accepted, fit.confidence, fit.camera.centre, fit.summary()
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from inference.calibration import CalibrationError, CameraLayout, calibrate, camera_layout
+from inference.camera import Camera
+from inference.court import Court
+from inference.masks import apply_mask, clip_mask
+
+from .lines import LineEvidence, background, hough_lines, line_mask, working_scale
+from .model import CourtLines, court_lines
+from .search import HIT_PX, best_hypotheses, hypotheses, split_lines
+
+N_FRAMES = 9
+MIN_COVERAGE = 0.6
+MAX_LINE_RMS = 1.0  # working px
+MIN_MARGIN = 1.1
+MIN_LINES_PER_KIND = 2
+MIN_NET_COVERAGE = 0.7  # of the net top's visible image length, when it is at least MIN_NET_PX long
+MIN_NET_PX = 50.0
+MAX_PIXELS = 4000
+COVERAGE_STEP_M = 0.1
+BANDS = (6.0, 3.0, 2.0)  # working px: pixels this close to a projected line are assigned to it, per round
+
+
+class AutoFitError(RuntimeError):
+    """The automatic fit found no court it can vouch for; the message says why and what to do instead."""
+
+
+@dataclass
+class AutoFit:
+    """The result of the automatic court fit.
+
+    Attributes:
+        camera: the fitted camera (``source: auto``, ``meta['auto']`` filled), or None when nothing fitted.
+        accepted: whether the fit passed the gate (see the module docstring).
+        confidence: in [0, 1]: coverage × (1 − line RMS / 3 working px) × (margin − 1) / 0.5, each clipped.
+        coverage: fraction of the visible painted court lines found on line pixels.
+        net_coverage: the same for the net's top (NaN when out of view).
+        line_rms_px: RMS distance (full-resolution px) of the assigned line pixels to the fitted lines.
+        lines_supported: (transverse, longitudinal) model lines with ≥ 50 % of their visible length found.
+        margin: score of the fit over that of the best different candidate (inf when there is none).
+        reason: why the fit was rejected ("" when accepted).
+        frames: the frame indices whose median was used.
+        cpu_seconds: CPU time of the fit (frame decoding included when :func:`fit_court` read them).
+    """
+
+    camera: Camera | None
+    accepted: bool
+    confidence: float = 0.0
+    coverage: float = 0.0
+    net_coverage: float = float("nan")
+    line_rms_px: float = float("nan")
+    lines_supported: tuple[int, int] = (0, 0)
+    margin: float = 0.0
+    reason: str = ""
+    frames: list[int] = field(default_factory=list)
+    cpu_seconds: float = 0.0
+
+    def meta(self) -> dict:
+        """The ``auto`` block of camera.yaml (docs/formats.md §11)."""
+        return {"accepted": self.accepted, "confidence": round(self.confidence, 3),
+                "coverage": round(self.coverage, 3),
+                "net_coverage": None if not np.isfinite(self.net_coverage) else round(self.net_coverage, 3),
+                "line_rms_px": round(float(self.line_rms_px), 3),
+                "lines_supported": list(self.lines_supported),
+                "margin": None if not np.isfinite(self.margin) else round(float(self.margin), 3),
+                "frames": list(self.frames), "reason": self.reason}
+
+    def summary(self) -> str:
+        state = "accepted" if self.accepted else f"REJECTED ({self.reason})"
+        net = f"{100 * self.net_coverage:.0f} %" if np.isfinite(self.net_coverage) else "not in view"
+        return (f"automatic court fit {state}: confidence {self.confidence:.2f}, coverage {100 * self.coverage:.0f} %, "
+                f"net {net}, line RMS {self.line_rms_px:.2f} px, "
+                f"lines {self.lines_supported[0]}+{self.lines_supported[1]}, margin {self.margin:.2f}, "
+                f"{self.cpu_seconds:.2f} s CPU")
+
+    def court_points(self, court: Court, margin_frac: float = 0.01) -> dict[str, np.ndarray]:
+        """Named floor points of ``court`` that the fitted camera puts inside the image: name → (2,) px."""
+        if self.camera is None:
+            return {}
+        w, h = self.camera.image_size
+        names = [n for n, p in court.points.items() if abs(p[2]) < 1e-9]
+        px = self.camera.project(court.point_array(names))
+        m = margin_frac * np.array([w, h])
+        ok = np.all((px >= m) & (px <= np.array([w, h]) - m), axis=1)
+        return {n: px[i] for i, n in enumerate(names) if ok[i]}
+
+    def require(self) -> Camera:
+        """The camera of an accepted fit; :class:`AutoFitError` otherwise."""
+        if not self.accepted or self.camera is None:
+            raise AutoFitError(f"the automatic court fit is not reliable ({self.reason or 'no court found'}) — "
+                               "click court points instead (rally3d label CLIP, or court_points.csv) and run "
+                               "rally3d calibrate")
+        return self.camera
+
+
+# ------------------------------------------------------------------------------- line refinement
+def _project(layout: CameraLayout, p: np.ndarray, X: np.ndarray) -> np.ndarray:
+    from inference.camera import distort_normalized
+
+    K, R, t, dist = layout.unpack(p)
+    Xc = X @ R.T + t
+    z = np.where(Xc[..., 2:3] > 1e-6, Xc[..., 2:3], 1e-6)
+    xn = Xc[..., :2] / z
+    if layout.n_dist:
+        xn = distort_normalized(xn.reshape(-1, 2), dist).reshape(xn.shape)
+    return xn @ K[:2, :2].T + K[:2, 2]
+
+
+def _signed_distance(pix: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """(N, 2) pixels, (K, 2) polyline → (N,) signed distance to the nearest piece of the polyline."""
+    A, B = poly[:-1], poly[1:]
+    AB = B - A
+    L2 = np.maximum(np.sum(AB * AB, axis=1), 1e-12)
+    AP = pix[:, None, :] - A[None]
+    t = np.clip(np.sum(AP * AB[None], axis=2) / L2, 0.0, 1.0)
+    D = AP - t[..., None] * AB[None]
+    d = np.linalg.norm(D, axis=2)
+    j = np.argmin(d, axis=1)
+    rows = np.arange(len(pix))
+    sign = np.sign(AB[j, 0] * AP[rows, j, 1] - AB[j, 1] * AP[rows, j, 0])
+    return np.where(sign == 0, 1.0, sign) * d[rows, j]
+
+
+def _polyline_points(segments: np.ndarray, n_dist: int) -> np.ndarray:
+    """(S, K, 3) points along each 3D segment: the ends alone when lines project straight (no distortion)."""
+    s = np.linspace(0.0, 1.0, 12 if n_dist else 2)[None, :, None]
+    return segments[:, :1] + s * (segments[:, 1:] - segments[:, :1])
+
+
+def _assign(cam_layout: CameraLayout, p: np.ndarray, polys3d: np.ndarray, pix: np.ndarray,
+            band: float) -> list[np.ndarray]:
+    """Indices of the pixels nearest to each projected segment, within ``band`` (full px)."""
+    proj = _project(cam_layout, p, polys3d)
+    d = np.stack([np.abs(_signed_distance(pix, poly)) for poly in proj], axis=1)
+    j = np.argmin(d, axis=1)
+    near = d[np.arange(len(pix)), j] <= band
+    return [np.nonzero(near & (j == s))[0] for s in range(len(polys3d))]
+
+
+def refine_on_lines(cam: Camera, segments: np.ndarray, pixels: np.ndarray, scale: float, n_dist: int = 0,
+                    bands: tuple[float, ...] = BANDS) -> tuple[Camera, np.ndarray, float]:
+    """Refine f, R, t (and k1 when ``n_dist``) on the distances of line pixels to the projected segments.
+
+    Args:
+        cam: the start camera (principal point at the image centre).
+        segments: (S, 2, 3) model line segments (court metres).
+        pixels: (N, 2) line pixels, full-resolution px.
+        scale: working px per full px (the bands and the robust scale are in working px).
+        n_dist: 0 or 1 radial coefficients.
+    Returns:
+        the camera, the final residuals (full px, of the pixels within the last band) and the robust cost.
+    """
+    layout = camera_layout("square", n_dist, "centre", cam.image_size)
+    p = layout.pack(cam)
+    polys = _polyline_points(segments, n_dist)
+    res, cost = np.zeros(0), np.inf
+    for band in bands:
+        groups = _assign(layout, p, polys, pixels, band / scale)
+        used = [(s, g) for s, g in enumerate(groups) if len(g) >= 5]
+        if sum(len(g) for _, g in used) < len(p) + 5:
+            break
+
+        def residuals(q, used=used):
+            proj = _project(layout, q, polys)
+            return np.concatenate([_signed_distance(pixels[g], proj[s]) for s, g in used])
+
+        # robust (soft-L1) through weights fixed for this round: Levenberg-Marquardt stays fast
+        f_scale = 1.0 / scale
+        w = (1.0 + (residuals(p) / f_scale) ** 2) ** -0.25
+        sol = least_squares(lambda q, w=w, fn=residuals: w * fn(q), p, method="lm", x_scale="jac",
+                            max_nfev=40 * len(p))
+        if np.all(np.isfinite(sol.x)) and sol.x[0] > 0:
+            p = sol.x
+            res = residuals(p)
+            cost = float(np.sum(2 * f_scale**2 * (np.sqrt(1 + (res / f_scale) ** 2) - 1)))
+    return layout.camera(p, cam.image_size), res, cost
+
+
+# ------------------------------------------------------------------------------------- evaluation
+@dataclass
+class _Candidate:
+    camera: Camera
+    residuals: np.ndarray
+    per_line: list[tuple[str, float, float]]  # floor segments: (kind, supported, visible) image length
+    net: tuple[float, float]  # the net's top: supported, visible image length
+
+    @property
+    def hits(self) -> float:
+        return sum(p[1] for p in self.per_line)
+
+    @property
+    def visible(self) -> float:
+        return sum(p[2] for p in self.per_line)
+
+    @property
+    def score(self) -> float:
+        """Supported minus half the unsupported image length (working px), floor lines and net."""
+        hits, vis = self.hits + self.net[0], self.visible + self.net[1]
+        return hits - 0.5 * (vis - hits)
+
+    @property
+    def net_coverage(self) -> float:
+        return self.net[0] / self.net[1] if self.net[1] > 0 else float("nan")
+
+    def same_as(self, other: _Candidate, model: CourtLines) -> bool:
+        """Whether both put the court's lines at the same place in the image (every floor crossing this
+        camera sees within 0.6 % of the larger image side): one placement, not a rival one."""
+        pts = np.concatenate([model.crossings(), np.zeros((len(model.crossings()), 1))], axis=1)
+        a, b = self.camera.project(pts), other.camera.project(pts)
+        w, h = self.camera.image_size
+        seen = np.isfinite(a).all(1) & (a >= 0).all(1) & (a[:, 0] <= w) & (a[:, 1] <= h)
+        if not seen.any():
+            return False
+        return bool(np.max(np.linalg.norm(a[seen] - b[seen], axis=1)) <= 0.006 * max(w, h))
+
+
+def _support(cam: Camera, ev: LineEvidence, segments: np.ndarray) -> list[tuple[str, float, float]]:
+    """Per 3D segment (S, 2, 3): its kind and the supported and visible image length (working px) of its
+    projection on the line pixels (as :func:`.search.score` does for homographies)."""
+    hh, ww = ev.distance.shape
+    per = []
+    for a, b in segments:
+        n = max(2, int(np.ceil(np.linalg.norm(b - a) / COVERAGE_STEP_M)) + 1)
+        xy = (cam.project(a + np.linspace(0, 1, n)[:, None] * (b - a)) + 0.5) * ev.scale - 0.5
+        step = np.linalg.norm(np.diff(xy, axis=0, append=xy[-1:]), axis=1)
+        wgt = np.where(np.isfinite(step), step, 0.0)
+        r = np.round(np.nan_to_num(xy, nan=-1.0)).astype(int)
+        ok = np.isfinite(xy).all(1) & (r[:, 0] >= 0) & (r[:, 0] < ww) & (r[:, 1] >= 0) & (r[:, 1] < hh)
+        d = np.full(n, np.inf)
+        d[ok] = ev.distance[r[ok, 1], r[ok, 0]]
+        kind = "transverse" if abs(b[1] - a[1]) < 1e-9 else "longitudinal"
+        per.append((kind, float(np.sum(wgt * (d <= HIT_PX))), float(np.sum(wgt * ok))))
+    return per
+
+
+def _centreline_rms(cam: Camera, segments: np.ndarray, pixels: np.ndarray, scale: float,
+                    bin_px: float = 12.0) -> float:
+    """RMS offset (full px) of the painted bands' centres from the fitted lines: line pixels within 2 working
+    px of a projected segment, their signed distances averaged in bins of ``bin_px`` working px along it
+    (a band's width averages out; its centre's offset remains)."""
+    layout = camera_layout("square", 1 if cam.dist is not None else 0, "centre", cam.image_size)
+    p = layout.pack(cam)
+    polys = _polyline_points(segments, layout.n_dist)
+    proj = _project(layout, p, polys)
+    groups = _assign(layout, p, polys, pixels, 2.0 / scale)
+    offsets = []
+    for s, g in enumerate(groups):
+        if len(g) < 5:
+            continue
+        d = _signed_distance(pixels[g], proj[s])
+        a, b = proj[s][0], proj[s][-1]
+        u = (b - a) / max(np.linalg.norm(b - a), 1e-9)
+        along = np.floor((pixels[g] - a) @ u * scale / bin_px).astype(int)
+        for k in np.unique(along):
+            sel = along == k
+            if sel.sum() >= 3:
+                offsets.append(float(np.mean(d[sel])))
+    return float(np.sqrt(np.mean(np.square(offsets)))) if offsets else float("nan")
+
+
+def _evaluate(cam: Camera, residuals: np.ndarray, ev: LineEvidence, model: CourtLines) -> _Candidate:
+    net = _support(cam, ev, model.raised)
+    return _Candidate(cam, residuals, _support(cam, ev, model.segments_3d),
+                      (sum(p[1] for p in net), sum(p[2] for p in net)))
+
+
+def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Camera | None:
+    """The coplanar calibration (item 1) from the court-line crossings mapped by the homography."""
+    floor = model.crossings()
+    P = np.concatenate([floor, np.ones((len(floor), 1))], axis=1) @ H.T
+    if np.any(P[:, 2] <= 0):
+        return None
+    world = np.concatenate([floor, np.zeros((len(floor), 1))], axis=1)
+    try:
+        return calibrate(world, P[:, :2] / P[:, 2:3], size).camera
+    except CalibrationError:
+        return None
+
+
+def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence,
+                     distortion: str) -> _Candidate:
+    """Refit with k1 and keep it when it explains clearly more painted line (2 % of the visible length), or
+    as much with the bands' centres clearly closer to the lines (15 % lower centre-line RMS)."""
+    if distortion == "none":
+        return best
+    cam1, res1, _ = refine_on_lines(best.camera, model.segments_3d, pixels, ev.scale, n_dist=1)
+    k1_cand = _evaluate(cam1, res1, ev, model)
+    if distortion == "k1":
+        return k1_cand
+    if k1_cand.score > best.score + 0.02 * best.visible:
+        return k1_cand
+    rms0 = _centreline_rms(best.camera, model.segments_3d, pixels, ev.scale)
+    rms1 = _centreline_rms(k1_cand.camera, model.segments_3d, pixels, ev.scale)
+    better = rms1 < 0.85 * rms0 and k1_cand.score > best.score - 0.01 * best.visible
+    return k1_cand if better else best
+
+
+# ---------------------------------------------------------------------------------------- the fit
+def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "auto", n_candidates: int = 6,
+                     frame_indices: list[int] | None = None) -> AutoFit:
+    """Fit the court's painted lines in RGB frames of one fixed view.
+
+    Args:
+        frames: RGB uint8 (H, W, 3) frames of the view (their median is used; 5–15 spread over the clip).
+        court: the court model (its ``lines.paint`` floor segments are fitted).
+        distortion: ``auto`` (k1 when it explains the lines clearly better), ``none`` or ``k1``.
+        n_candidates: correspondence hypotheses refined.
+        frame_indices: recorded in the result.
+    """
+    t0 = time.process_time()
+    if not frames:
+        raise ValueError("no frames to fit the court in")
+    h, w = frames[0].shape[:2]
+    size = (w, h)
+    model = court_lines(court)
+    scale = working_scale(size)
+    ev = LineEvidence.from_mask(line_mask(background(frames, scale)), scale, size)
+    out = AutoFit(None, False, frames=list(frame_indices or []))
+    trans, longi = split_lines(hough_lines(ev), size)
+    Hs = hypotheses(trans, longi, model, size, court.net_y)
+    hyps = best_hypotheses(Hs, ev, model, n_candidates)
+    rng = np.random.default_rng(0)
+    pixels = ev.pixels if len(ev.pixels) <= MAX_PIXELS else ev.pixels[rng.choice(len(ev.pixels), MAX_PIXELS,
+                                                                                 replace=False)]
+    cands: list[_Candidate] = []
+    for hyp in hyps:
+        start = _start_camera(hyp.H, model, size)
+        if start is None:
+            continue
+        cam, res, _ = refine_on_lines(start, model.segments_3d, pixels, scale)
+        cands.append(_evaluate(cam, res, ev, model))
+    if not cands:
+        out.reason = (f"no court found ({len(trans)} transverse and {len(longi)} longitudinal lines, "
+                      f"{len(Hs)} plausible correspondences)")
+        out.cpu_seconds = time.process_time() - t0
+        return out
+    cands.sort(key=lambda c: -c.score)
+    best = _with_distortion(cands[0], model, pixels, ev, distortion)
+    others = [c for c in cands[1:] if not c.same_as(cands[0], model)]
+    margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
+    _judge(out, best, margin, ev, court, model, pixels)
+    out.cpu_seconds = time.process_time() - t0
+    return out
+
+
+def _judge(out: AutoFit, best: _Candidate, margin: float, ev: LineEvidence, court: Court, model: CourtLines,
+           pixels: np.ndarray) -> None:
+    """Fill the fit's figures, confidence and gate decision."""
+    cam = best.camera
+    out.camera = cam
+    out.coverage = best.hits / max(best.visible, 1)
+    out.net_coverage = best.net_coverage
+    out.line_rms_px = _centreline_rms(cam, model.segments_3d, pixels, ev.scale)
+    out.lines_supported = tuple(sum(1 for k, hh, v in best.per_line if k == kind and v >= 20 and hh >= 0.5 * v)
+                                for kind in ("transverse", "longitudinal"))
+    out.margin = margin
+    rms_w = out.line_rms_px * ev.scale
+    out.confidence = float(np.clip(out.coverage, 0, 1) * np.clip(1 - rms_w / 3.0, 0, 1) *
+                           np.clip((margin - 1) / 0.5, 0, 1))
+    c = cam.centre
+    problems = []
+    if out.coverage < MIN_COVERAGE:
+        problems.append(f"only {100 * out.coverage:.0f} % of the visible court lines found")
+    if not rms_w <= MAX_LINE_RMS:
+        problems.append(f"line pixels {out.line_rms_px:.1f} px from the fitted lines")
+    if min(out.lines_supported) < MIN_LINES_PER_KIND:
+        problems.append(f"too few lines supported ({out.lines_supported[0]} across, {out.lines_supported[1]} along)")
+    if best.net[1] >= MIN_NET_PX and best.net_coverage < MIN_NET_COVERAGE:
+        problems.append(f"the net is not where the fit puts it ({100 * best.net_coverage:.0f} % found)")
+    if margin < MIN_MARGIN:
+        problems.append(f"another placement of the court fits almost as well (margin {margin:.2f})")
+    if not (c[2] > 1.0 and c[1] < court.net_y):
+        problems.append(f"implausible camera position {np.round(c, 1).tolist()}")
+    out.accepted = not problems
+    out.reason = "; ".join(problems)
+    cam.source = "auto"
+    cam.meta["auto"] = out.meta()
+
+
+def sample_frame_indices(n_frames: int, n: int = N_FRAMES, start: int = 0, stop: int | None = None) -> list[int]:
+    """``n`` frame indices spread evenly over ``[start, stop)``."""
+    stop = n_frames if stop is None else min(stop, n_frames)
+    if stop <= start:
+        raise ValueError(f"no frames between {start} and {stop}")
+    return sorted({int(i) for i in np.linspace(start, stop - 1, min(n, stop - start))})
+
+
+def fit_court(clip, court: Court, distortion: str = "auto", frames: list[int] | None = None) -> AutoFit:
+    """Fit the court in a clip folder (:class:`inference.clipio.Clip`): the median of :data:`N_FRAMES`
+    frames spread over the clip (or the given frame indices)."""
+    t0 = time.process_time()
+    idx = frames if frames is not None else sample_frame_indices(clip.n_frames)
+    rects = clip_mask(clip)
+    with clip.frames(cache_size=0) as src:
+        images = [apply_mask(src.read(i), rects) for i in idx]
+    fit = fit_court_frames(images, court, distortion=distortion, frame_indices=idx)
+    fit.cpu_seconds = time.process_time() - t0
+    if fit.camera is not None:
+        fit.camera.meta["auto"] = fit.meta()
+    return fit

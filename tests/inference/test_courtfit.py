@@ -1,0 +1,132 @@
+"""The automatic court fit on rendered views (venue, players, noise, JPEG) and its gate; `calibrate --auto`."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inference.camera import Camera
+from inference.cli import main
+from inference.clipio import Clip, write_video
+from inference.court import load_court
+from inference.courtfit import AutoFitError, fit_court, fit_court_frames, sample_frame_indices
+from training.synth.generate import SynthConfig, SynthScene
+
+SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample" / "padel_sample"
+FLOOR = ["near_left", "near_right", "far_left", "far_right", "near_service_left", "near_service_center",
+         "near_service_right", "far_service_left", "far_service_center", "far_service_right", "net_left",
+         "net_right"]
+
+
+def _scene_frames(sport: str, preset: str, seed: int, n: int = 7) -> tuple[SynthScene, list[np.ndarray]]:
+    scene = SynthScene.build(seed, SynthConfig(sport=sport, camera=preset, width=1280, height=720))
+    look = scene.look
+    # the test is about the realistic look: players, venue, sensor noise and JPEG all on
+    assert look.jpeg_quality is not None and look.noise_sigma > 0.5 and scene.rally.players
+    return scene, [scene.frame(i)[0] for i in sample_frame_indices(scene.rally.n_frames, n)]
+
+
+def _floor_rms(cam: Camera, gt: Camera, court) -> float:
+    pts = court.point_array(FLOOR)
+    px = gt.project(pts)
+    pts = pts[((px >= 0) & (px <= np.array(gt.image_size))).all(1)]
+    return float(np.sqrt(np.mean(np.sum((cam.project(pts) - gt.project(pts)) ** 2, axis=1))))
+
+
+@pytest.mark.parametrize("sport, preset, seed", [("padel", "padel_broadcast", 4), ("tennis", "tennis_broadcast", 0), ("tennis", "tennis_high", 2)])
+def test_fit_finds_the_court_in_a_realistic_view(sport, preset, seed):
+    scene, frames = _scene_frames(sport, preset, seed)
+    fit = fit_court_frames(frames, scene.court)
+    gt = scene.camera
+    assert fit.accepted, fit.summary()
+    assert fit.confidence > 0.3 and fit.coverage > 0.8
+    assert np.linalg.norm(fit.camera.centre - gt.centre) < 0.3
+    assert abs(fit.camera.K[0, 0] / gt.K[0, 0] - 1) < 0.03
+    assert _floor_rms(fit.camera, gt, scene.court) < 2.0
+    assert fit.camera.source == "auto" and fit.camera.meta["auto"]["accepted"] is True
+    # the fitted floor points are in the image and close to the true ones
+    pts = fit.court_points(scene.court)
+    assert len(pts) >= 8
+    err = [np.linalg.norm(xy - gt.project(scene.court.points[n][None])[0]) for n, xy in pts.items()]
+    assert np.median(err) < 2.0
+
+
+def test_gate_refuses_a_view_without_a_court():
+    rng = np.random.default_rng(0)
+    frames = [np.clip(90 + rng.normal(0, 4, (720, 1280, 3)), 0, 255).astype(np.uint8) for _ in range(3)]
+    fit = fit_court_frames(frames, load_court("padel"))
+    assert not fit.accepted and fit.reason
+    with pytest.raises(AutoFitError, match="click court points"):
+        fit.require()
+
+
+def test_gate_refuses_the_wrong_court_model():
+    """Padel lines fitted with the tennis model: no placement explains them well enough to pass."""
+    scene, frames = _scene_frames("padel", "padel_broadcast", 4, n=5)
+    fit = fit_court_frames(frames, load_court("tennis"))
+    assert not fit.accepted, fit.summary()
+    assert "REJECTED" in fit.summary()
+
+
+# ------------------------------------------------------------------------------------------ the CLI
+@pytest.fixture
+def sample_clip(tmp_path) -> Path:
+    root = tmp_path / "clip"
+    shutil.copytree(SAMPLE, root)
+    for name in ("camera.yaml", "court_points.csv"):
+        (root / name).unlink(missing_ok=True)
+    return root
+
+
+def test_calibrate_auto_writes_camera_and_points_to_correct(sample_clip, capsys):
+    assert main(["calibrate", str(sample_clip), "--auto"]) == 0
+    out = capsys.readouterr().out
+    assert "automatic court fit accepted" in out
+    cam = Camera.load(sample_clip / "camera.yaml")
+    gt = Camera.load(sample_clip / "gt" / "camera.yaml")
+    assert cam.source == "auto" and cam.meta["auto"]["accepted"] is True
+    assert np.linalg.norm(cam.centre - gt.centre) < 0.3
+    # the fitted points are a court_points.csv a person can correct in the labeler; they calibrate alike
+    points = Clip(sample_clip).read_court_points(known_names=load_court("padel").point_names)
+    assert len(points) >= 6
+    assert main(["calibrate", str(sample_clip), "--dry-run"]) == 0
+    assert "plane calibration" in capsys.readouterr().out
+
+
+def test_calibrate_auto_leaves_clicked_points_alone(sample_clip, capsys):
+    clicked = (SAMPLE / "court_points.csv").read_text()
+    (sample_clip / "court_points.csv").write_text(clicked)
+    assert main(["calibrate", str(sample_clip), "--auto", "--frames", "0,60,120,180"]) == 0
+    assert (sample_clip / "court_points.csv").read_text() == clicked
+    assert (sample_clip / "court_points_auto.csv").is_file()
+    assert Camera.load(sample_clip / "camera.yaml").meta["auto"]["frames"] == [0, 60, 120, 180]
+
+
+def test_calibrate_auto_refuses_and_writes_nothing_without_a_court(tmp_path, capsys):
+    root = tmp_path / "grey"
+    root.mkdir()
+    write_video(root / "video.mp4", [np.full((360, 640, 3), 90, np.uint8) for _ in range(5)], fps=25.0)
+    (root / "clip.yaml").write_text("sport: padel\nfps: 25\nwidth: 640\nheight: 360\nvideo: video.mp4\n")
+    assert main(["calibrate", str(root), "--auto"]) == 1
+    assert "not reliable" in capsys.readouterr().err
+    assert not (root / "camera.yaml").exists() and not (root / "court_points.csv").exists()
+
+
+def test_infer_with_court_points_auto_calibrates_the_video(sample_clip, tmp_path, capsys):
+    out = tmp_path / "result"
+    code = main(["infer", str(sample_clip / "video.mp4"), "--court", "padel", "--court-points", "auto",
+                 "--out", str(out), "--no-progress", "--pose", "none", "--only", "camera"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    cam = Camera.load(out / "camera.yaml")
+    assert cam.source == "auto"
+    assert np.linalg.norm(cam.centre - Camera.load(sample_clip / "gt" / "camera.yaml").centre) < 0.3
+    assert "automatic court fit accepted" in text
+
+
+def test_fit_court_reads_a_clip_folder(sample_clip):
+    fit = fit_court(Clip(sample_clip), load_court("padel"), frames=[0, 100, 200])
+    assert fit.frames == [0, 100, 200] and fit.accepted
+    assert fit.cpu_seconds > 0
