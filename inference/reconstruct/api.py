@@ -9,6 +9,7 @@ from inference.court import Court
 
 from .joint import fit_joint, net_height
 from .observations import Observations
+from .plausibility import summary
 from .results import RallyFit, SegmentFit
 
 #: The default and the four published methods, in the order of the thesis's tables.
@@ -35,6 +36,8 @@ def reconstruct(obs: Observations, method: str = DEFAULT_METHOD) -> RallyFit:
     for seg in fit.segments:
         if seg.ok:
             seg.figures.update(shot_figures(seg, obs.court, obs.fps))
+    if "plausibility" not in fit.extra:
+        fit.extra["plausibility"] = summary(fit, obs)
     return fit
 
 
