@@ -48,6 +48,12 @@ def run_reconstruct(args: argparse.Namespace) -> int:
         print(f"{seg.index:>6} {seg.start:>4}-{seg.end:<4} {seg.start_event:>12} {seg.end_event:>12} "
               f"{d.get('launch_speed_kmh', float('nan')):>11.1f} {'' if net is None else f'{net:.2f}':>6} "
               f"{s.reproj_rms_px:>7.2f}")
+    pl = fit.extra.get("plausibility", {})
+    if pl:
+        verdict = "plausible" if pl["plausible"] else "NOT plausible"
+        print(f"plausibility: {verdict} — {pl['reconstructed']}/{pl['flights']} flights reconstructed, "
+              f"{pl['frames_inside_court']:.1%} of frames inside the court, {pl['contacts_below_floor']} contacts "
+              f"below the floor")
     print(f"wrote {clip.ball_3d_path} and {clip.segments_path}")
     return 0
 
