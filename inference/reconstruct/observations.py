@@ -20,11 +20,14 @@ from inference.clipio import BallTrack, Clip, FormatError, HitEvents, PlayerTrac
 from inference.clipio.csvfiles import separate_same_frame
 from inference.court import Court, Plane, load_court
 from inference.geometry import intersect_planes
+from inference.skeleton import COCO17
 
 PLAYER_EVENTS = ("player_near", "player_far")
 #: frames searched for a 2D ball around a surface contact when none is within 2 frames (the fit moves the
 #: contact point on its surface, so a rough first guess is enough)
 FAR_GAP = 10
+#: COCO-17 indices of the wrists (the hitter's hand height when players.csv has poses)
+WRISTS = (COCO17.index("left_wrist"), COCO17.index("right_wrist"))
 
 
 @dataclass
@@ -104,14 +107,15 @@ class Segment:
     """The ball's flight from one contact (event) to the next.
 
     Attributes:
-        index: position in the rally; start, end: event frames; start_event, end_event: their labels.
+        index: position in the rally; start, end: event frames; start_event, end_event: their labels (None
+            for a free end: the flight before the first event or after the last one).
     """
 
     index: int
     start: int
     end: int
-    start_event: str
-    end_event: str
+    start_event: str | None
+    end_event: str | None
 
     @property
     def frames(self) -> np.ndarray:
@@ -134,6 +138,7 @@ class ContactPrior:
         plane: the surface touched (for ``plane`` contacts whose line of sight meets one), else None.
         candidates: the planes the label allows.
         hitter_xy: (2,) the hitter's court position for a racket hit when players.csv has it.
+        hand_z: the hitter's hand (wrist) height (m) when players.csv has a pose for that frame, else None.
         outside: the line of sight misses the surface's extent: the point is on the unbounded plane.
         reason: why no point could be made (empty when fine).
     """
@@ -145,6 +150,7 @@ class ContactPrior:
     plane: Plane | None = None
     candidates: list[Plane] = field(default_factory=list)
     hitter_xy: np.ndarray | None = None
+    hand_z: float | None = None
     outside: bool = False
     reason: str = ""
 
@@ -190,6 +196,26 @@ def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
     v = X - o
     dist = np.linalg.norm(v - (v @ d[0])[:, None] * d, axis=1)
     return int(rows[int(np.argmin(dist))])
+
+
+def hand_height(obs: Observations, row: int, uv: np.ndarray | None) -> float | None:
+    """Height (m) of the hitter's hand nearest the ball in the image: the wrist's line of sight meets the
+    upright plane through the player's court position facing the camera. None without a usable wrist."""
+    p = obs.players
+    kp = p.keypoints[row, list(WRISTS)]                                   # (2, 3) normalised x, y, score
+    ok = np.isfinite(kp).all(axis=1) & (kp[:, 2] > 0.3)
+    if not ok.any():
+        return None
+    px = kp[ok, :2] * np.asarray(obs.camera.image_size, float)
+    w = px[int(np.argmin(np.linalg.norm(px - uv, axis=1)))] if uv is not None else px[0]
+    o, d = obs.camera.rays(w[None])
+    foot = np.array([*p.court_xy[row], 0.0])
+    n = foot - obs.camera.centre
+    n[2] = 0.0
+    if np.linalg.norm(n) < 1e-6 or abs(d[0] @ n) < 1e-9:
+        return None
+    z = float((o[0] + ((foot - o[0]) @ n) / (d[0] @ n) * d[0])[2])
+    return z if 0.0 <= z <= 3.5 else None
 
 
 def hit_point_guess(obs: Observations, uv: np.ndarray, hitter_xy: np.ndarray | None) -> np.ndarray:
@@ -239,7 +265,8 @@ def contact_prior(obs: Observations, frame: int, label: str, unbounded_ok: bool 
         hitter = None if row is None else obs.players.court_xy[row]
         point = hit_point_guess(obs, uv, hitter) if uv is not None else np.full(3, np.nan)
         reason = "" if uv is not None else "no 2D ball near the hit frame"
-        return ContactPrior(frame, label, "hit", point, hitter_xy=hitter, reason=reason)
+        hand = hand_height(obs, row, uv) if row is not None else None
+        return ContactPrior(frame, label, "hit", point, hitter_xy=hitter, hand_z=hand, reason=reason)
     planes = obs.court.planes_for(label)
     if not planes:
         return ContactPrior(frame, label, "plane", np.full(3, np.nan),
