@@ -46,6 +46,7 @@ class JointConfig(ShootingConfig):
     rms_fail_factor: float = 4.0      # a flight with RMS above this × pixel_sigma is refitted or failed
     refit: bool = True                # try other contact hypotheses for flights that do not fit
     max_refits: int = 8               # flights examined per rally
+    max_hypotheses: int = 16          # rally fits tried in all by the refits (each is a whole fit)
     sigma_inflation: float = 1.0      # covariance scale for what the model leaves out (bench/bench_joint.py)
     sigma_floor_m: float = 0.003      # isotropic m added to every frame's σ
     max_sigma_m: float = 3.0          # a flight whose median σ exceeds this is reported failed
@@ -421,6 +422,8 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
             for plan in hypotheses(obs, fit, k, cfg):
                 if plan.key() in tried:
                     continue
+                if len(tried) > cfg.max_hypotheses:
+                    break
                 tried.add(plan.key())
                 cand = _fit_with_ends(obs, plan, cfg, model, hit_prior,
                                       warm=_remember(fit.problem.chain, fit.sol.theta))
