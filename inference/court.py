@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -124,7 +125,7 @@ class Plane:
         if abs(float(self.u @ self.v)) > 1e-6:
             raise ValueError(f"plane {self.name}: u and v must be orthogonal")
 
-    @property
+    @cached_property
     def normal(self) -> np.ndarray:
         """(3,) unit normal ``u × v``, pointing into the court."""
         return np.cross(self.u, self.v)

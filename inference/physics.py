@@ -229,3 +229,41 @@ def integrate(
             rows.append(state)
     arr = np.stack([state_to_array(s) for s in rows])  # (S, B, 9)
     return FlightSamples(np.asarray(times), arr[..., 0:3], arr[..., 3:6], arr[..., 6:9])
+
+
+#: I = α m r² of a thin-walled hollow ball (tennis, padel, table tennis).
+HOLLOW_SPHERE = 2.0 / 3.0
+
+
+def bounce(vel: np.ndarray, spin: np.ndarray, normal: np.ndarray, restitution, friction, radius: float,
+           inertia_factor: float = HOLLOW_SPHERE) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid-ball impact on a rigid plane, vectorised: normal restitution and Coulomb friction.
+
+    The normal velocity is reversed and scaled by ``restitution`` e. The tangential impulse is the one that
+    stops the contact point sliding (the ball leaves rolling), capped by friction μ (1 + e) |v_n| (the ball
+    keeps sliding); it changes the spin by the matching torque.
+
+    Args:
+        vel, spin: (B, 3) velocity (m/s) and angular velocity (rad/s) just before the contact.
+        normal: (B, 3) or (3,) unit normals pointing towards the ball.
+        restitution, friction: scalars or (B,) e and μ.
+        radius: ball radius (m); inertia_factor: α of I = α m r².
+    Returns:
+        (vel, spin), each (B, 3), just after the contact.
+    """
+    v = np.atleast_2d(np.asarray(vel, dtype=float))
+    w = np.atleast_2d(np.asarray(spin, dtype=float))
+    n = np.broadcast_to(np.asarray(normal, dtype=float), v.shape)
+    e = np.asarray(restitution, dtype=float).reshape(-1, 1) if np.ndim(restitution) else float(restitution)
+    mu = np.asarray(friction, dtype=float).reshape(-1) if np.ndim(friction) else float(friction)
+    vn = np.einsum("bi,bi->b", v, n)[:, None]
+    vt = v - vn * n
+    slip = vt - radius * np.cross(w, n)                     # tangential velocity of the contact point
+    grip = inertia_factor / (1.0 + inertia_factor)
+    limit = mu * (1.0 + np.reshape(e, -1)) * np.abs(vn[:, 0])
+    speed = np.linalg.norm(slip, axis=1)
+    scale = np.where(grip * speed <= limit, grip, limit / np.maximum(speed, 1e-12))
+    j = -scale[:, None] * slip                              # tangential impulse / mass
+    new_v = vt + j - e * vn * n
+    new_w = w - np.cross(n, j) / (inertia_factor * radius)
+    return new_v, new_w

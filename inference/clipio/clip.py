@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterable
 from functools import cached_property
 from pathlib import Path
@@ -18,7 +19,6 @@ if TYPE_CHECKING:
     from inference.camera import Camera
 
 T = TypeVar("T")
-
 
 
 class Clip:
@@ -128,11 +128,31 @@ class Clip:
 
     @cached_property
     def n_frames(self) -> int:
-        """Number of frames: ``clip.yaml``'s ``n_frames``, else counted from the frame source."""
+        """Number of frames: ``clip.yaml``'s ``n_frames``, else counted from the frame source, else (no
+        video, e.g. a CSV-only clip) one past the last frame that ball.csv, events.csv or players.csv name."""
         if self.info.n_frames is not None:
             return self.info.n_frames
+        if not self.video_path.exists():
+            n = self.frames_in_data()
+            if n:
+                warnings.warn(f"{self.video_path}: not found; {n} frames taken from the clip's tables "
+                              "(write n_frames in clip.yaml to fix the count)", stacklevel=2)
+                return n
+            raise FormatError(self.video_path, "not found, and no table names a frame",
+                              fix="write n_frames in clip.yaml, or put the video where clip.yaml's video says")
         with self.frames(cache_size=1) as src:
             return len(src)
+
+    def frames_in_data(self) -> int:
+        """One past the last frame named by ball.csv, events.csv or players.csv (0 when none exists)."""
+        last = -1
+        for path, read in ((self.ball_path, self.read_ball), (self.events_path, self.read_events),
+                           (self.players_path, self.read_players)):
+            if path.is_file():
+                frames = read(n_frames=None).frame
+                if len(frames):
+                    last = max(last, int(frames.max()))
+        return last + 1
 
     def _frame_limit(self, n_frames: int | None) -> int | None:
         """``n_frames`` if given, else clip.yaml's ``n_frames`` (None when neither is known)."""

@@ -9,6 +9,7 @@ Example::
     video: video.mp4        # or frames/
     n_frames: 912           # optional
     camera_id: cam0         # optional; so are split, source, licence
+    source: {url: https://example.org/match, t0: 812.4}   # provenance: any YAML value
     court: ../courts/padel_indoor.yaml   # optional, overrides conf/court/<sport>.yaml
 
 Unknown keys are kept in :attr:`ClipInfo.extra` and written back.
@@ -28,7 +29,7 @@ from .csvtable import read_text
 from .errors import FormatError
 
 REQUIRED_KEYS = ("sport", "fps", "width", "height", "video")
-OPTIONAL_TEXT_KEYS = ("camera_id", "split", "source", "licence", "court")
+OPTIONAL_TEXT_KEYS = ("camera_id", "split", "licence", "court")
 
 
 class ClipInfoError(ValueError):
@@ -50,7 +51,8 @@ class ClipInfo:
         video: the frames, relative to the clip folder: a video file (``video.mp4``) or a folder
             of JPEGs (``frames/``).
         n_frames: number of frames, when known (> 0).
-        camera_id, split, source, licence: free text, optional.
+        camera_id, split, licence: free text, optional.
+        source: provenance, optional: any YAML value (text, a mapping, a list ...), kept as written.
         court: path to a court YAML (relative to the clip folder), overriding ``sport``'s default.
         extra: unknown keys, kept on a round trip.
     """
@@ -63,7 +65,7 @@ class ClipInfo:
     n_frames: int | None = None
     camera_id: str | None = None
     split: str | None = None
-    source: str | None = None
+    source: Any = None
     licence: str | None = None
     court: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)

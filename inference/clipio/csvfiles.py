@@ -8,6 +8,7 @@ with 5.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -126,12 +127,47 @@ def write_inactive_balls_csv(path: str | Path, balls: InactiveBalls) -> Path:
 
 # --------------------------------------------------------------------------------------- events.csv
 def read_events_csv(path: str | Path, *, n_frames: int | None = None) -> HitEvents:
-    """Read ``events.csv`` (``frame,event``); labels must be from ``EVENT_LABELS``."""
+    """Read ``events.csv`` (``frame,event``); labels must be from ``EVENT_LABELS``.
+
+    Events on one frame are kept: the later row moves to the next free frame (see
+    :func:`separate_same_frame`), with a warning.
+    """
     table = CsvTable.read(path, EVENTS_COLUMNS)
-    frame = _frames(table, n_frames)
+    frame = _frames(table, n_frames, unique=False)
     event = table.choices("event", EVENT_LABELS)
+    frame, event, moved = separate_same_frame(frame, event, n_frames)
+    if moved:
+        warnings.warn(f"{path}: events on one frame moved to the next free frame: {'; '.join(moved[:5])}"
+                      + (f" (+{len(moved) - 5} more)" if len(moved) > 5 else ""), stacklevel=2)
+    return HitEvents(frame, event)
+
+
+def separate_same_frame(frame: np.ndarray, event: np.ndarray,
+                        n_frames: int | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Give every event its own frame, keeping their order.
+
+    Events are sorted by frame (stable: rows of one frame keep their order); an event on a frame already
+    taken moves to the next free frame (a corner bounce: floor, then glass a frame later). When that runs
+    past ``n_frames``, the events at the end move back instead.
+
+    Returns:
+        (frame (N,) strictly increasing, event (N,), one note per moved event).
+    """
     order = np.argsort(frame, kind="stable")
-    return HitEvents(frame[order], event[order])
+    f = np.asarray(frame, np.int64)[order].copy()
+    ev = np.asarray(event)[order]
+    moved = []
+    for i in range(1, len(f)):
+        if f[i] <= f[i - 1]:
+            moved.append(f"{ev[i]} {f[i]} → {f[i - 1] + 1}")
+            f[i] = f[i - 1] + 1
+    if n_frames is not None and len(f) and f[-1] >= n_frames:
+        f[-1] = n_frames - 1
+        for i in range(len(f) - 2, -1, -1):
+            f[i] = min(f[i], f[i + 1] - 1)
+        if f[0] < 0:
+            raise ValueError(f"{len(f)} events do not fit in {n_frames} frames")
+    return f, ev, moved
 
 
 def write_events_csv(path: str | Path, events: HitEvents) -> Path:

@@ -9,7 +9,8 @@
       - {path: clip_0000, split: train}
       - {path: clip_0001, split: val}
 
-Paths are relative to the manifest's folder. Splits are by clip (or by match: give all clips of a
+Paths are relative to the manifest's folder. An entry may name its folder with ``name:`` instead of
+``path:`` (as other dataset tools write it), or be the folder name alone (``- clip_0002``). Splits are by clip (or by match: give all clips of a
 match the same split), never by frame, so no rally leaks between training and evaluation.
 """
 from __future__ import annotations
@@ -85,12 +86,16 @@ class Manifest:
                               fix="see datasets/README.md for the manifest layout")
         clips = []
         for i, c in enumerate(data["clips"]):
-            if not isinstance(c, dict) or "path" not in c:
-                raise FormatError(path, f"clip entry {i} needs a `path`")
+            if isinstance(c, str) and c.strip():
+                c = {"path": c}
+            folder = c.get("path", c.get("name")) if isinstance(c, dict) else None
+            if folder is None or not str(folder).strip():
+                raise FormatError(path, f"clip entry {i} needs a `path` (or `name`): the clip folder",
+                                  fix="write `- {path: clip_0000, split: train}`")
             try:
-                clips.append(ManifestEntry(str(c["path"]), str(c.get("split", "train"))))
+                clips.append(ManifestEntry(str(folder), str(c.get("split", "train"))))
             except ValueError as e:
-                raise FormatError(path, f"clip entry {i} ({c['path']}): {e}") from None
+                raise FormatError(path, f"clip entry {i} ({folder}): {e}") from None
         missing = [c.path for c in clips if not (path.parent / c.path / "clip.yaml").is_file()]
         if missing:
             raise FormatError(path, f"clip folders without clip.yaml: {missing[:5]}",

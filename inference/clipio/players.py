@@ -9,9 +9,14 @@ Columns::
 Image coordinates are normalised (``u = x_px / width``); unlike ball.csv they may lie outside [0, 1]
 (a joint or box can leave the image) but must be finite where given. Empty = unknown (NaN).
 ``team`` is ``near``, ``far`` or empty.
+
+A file from another tool (e.g. ``frame,track_id,team,x_m,y_m``) is read for what it has: only ``frame``
+is required, :data:`ALIASES` map common other names onto ours, missing columns are unknown (NaN) and a
+team other than ``near``/``far`` is unknown; one warning lists what was missing or ignored.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +32,9 @@ BASE_COLUMNS = ("frame", "player_id", "team", "score", "x1", "y1", "x2", "y2", "
 KP_COLUMNS = tuple(f"{j}_{c}" for j in COCO17 for c in ("x", "y", "s"))
 KP3D_COLUMNS = tuple(f"{j}_{c}_m" for j in COCO17 for c in ("x", "y", "z"))
 J = len(COCO17)
+#: Other tools' names for our columns (matched case-insensitively) in a players.csv of another layout.
+ALIASES = {"player_id": ("track_id", "id", "player"), "team": ("side",),
+           "court_x_m": ("x_m", "court_x"), "court_y_m": ("y_m", "court_y")}
 
 
 @dataclass(eq=False)
@@ -100,29 +108,71 @@ class PlayerTracks(ArraysEqualMixin):
 
 
 def read_players_csv(path: str | Path, *, n_frames: int | None = None) -> PlayerTracks:
-    """Read ``players.csv``; the 3D joint columns are optional."""
-    table = CsvTable.read(path, BASE_COLUMNS + KP_COLUMNS, optional=KP3D_COLUMNS)
+    """Read ``players.csv``; the 3D joint columns are optional.
+
+    A file in another layout (any base or keypoint column missing) is read for what it has, with one
+    warning (module docstring); only a missing ``frame`` column, a bad value in a column that is there, or
+    a repeated (frame, player) is an error.
+    """
+    table = CsvTable.read(path, ("frame",), optional=BASE_COLUMNS + KP_COLUMNS + KP3D_COLUMNS)
+    names = _column_names(table)
+    foreign = any(c not in names for c in BASE_COLUMNS + KP_COLUMNS)
     frame = table.ints("frame")
     table.check_frames(frame, n_frames=n_frames, unique=False)
-    pid = table.ints("player_id")
-    table.check(pid < 0, lambda i: f"negative player_id {pid[i]}", fix="number players 0, 1, 2, ...")
+    n = len(table)
+    notes: list[str] = []
+    if "player_id" in names:
+        pid = table.ints(names["player_id"])
+        table.check(pid < 0, lambda i: f"negative player_id {pid[i]}", fix="number players 0, 1, 2, ...")
+    else:  # one anonymous player per row of a frame
+        pid = np.zeros(n, np.int64)
+        for f in np.unique(frame):
+            rows = np.flatnonzero(frame == f)
+            pid[rows] = np.arange(len(rows))
     table.check(duplicated(np.stack([frame, pid], axis=1)),
                 lambda i: f"duplicate (frame, player_id) = ({frame[i]}, {pid[i]})",
                 fix="keep one row per player and frame")
-    team = np.array(table.strings("team"), dtype=str)
+    team = np.array(table.strings(names["team"]) if "team" in names else [""] * n, dtype=str).reshape(n)
+    unknown = ~np.isin(team, TEAMS)
+    if foreign and unknown.any():
+        notes.append(f"team values {sorted(set(team[unknown].tolist()))[:5]} read as unknown (use near/far)")
+        team = np.where(unknown, "", team)
     table.check(~np.isin(team, TEAMS), lambda i: f"unknown team {str(team[i])!r}", fix="use near, far or leave empty")
 
-    def cols(names) -> np.ndarray:
-        return np.stack([table.floats(c, allow_empty=True) for c in names], axis=1).reshape(len(table), len(names))
+    def cols(wanted) -> np.ndarray:
+        out = np.full((n, len(wanted)), np.nan)
+        for k, c in enumerate(wanted):
+            if c in names:
+                out[:, k] = table.floats(names[c], allow_empty=True)
+        return out
 
-    score = table.floats("score", allow_empty=True)
+    score = cols(("score",))[:, 0]
     kp = cols(KP_COLUMNS).reshape(-1, J, 3)
-    has3d = all(table.has(c) for c in KP3D_COLUMNS)
+    has3d = all(c in names for c in KP3D_COLUMNS)
     j3d = cols(KP3D_COLUMNS).reshape(-1, J, 3) if has3d else None
+    if foreign:
+        missing = [c for c in BASE_COLUMNS if c not in names]
+        kp_missing = sum(c not in names for c in KP_COLUMNS)
+        what = missing + ([f"{kp_missing} keypoint columns"] if kp_missing else [])
+        notes.insert(0, f"another layout: read {', '.join(sorted(set(names.values()) - {'frame'}) or ['frame'])}"
+                        f"; unknown (missing): {', '.join(what)}")
+        warnings.warn(f"{path}: " + "; ".join(notes), stacklevel=2)
     order = np.lexsort((pid, frame))
     return PlayerTracks(frame[order], pid[order], team[order], score[order], cols(("x1", "y1", "x2", "y2"))[order],
                         kp[order], cols(("court_x_m", "court_y_m"))[order],
                         None if j3d is None else j3d[order])
+
+
+def _column_names(table: CsvTable) -> dict[str, str]:
+    """Our column name → the file's column holding it (exact names first, then :data:`ALIASES`)."""
+    lower = {h.lower(): h for h in table.header}
+    out = {c: c for c in BASE_COLUMNS + KP_COLUMNS + KP3D_COLUMNS if table.has(c)}
+    for ours, others in ALIASES.items():
+        if ours not in out:
+            found = [lower[o] for o in (ours, *others) if o in lower]
+            if found:
+                out[ours] = found[0]
+    return out
 
 
 def write_players_csv(path: str | Path, players: PlayerTracks) -> Path:

@@ -288,8 +288,8 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     if not clip.camera_path.is_file():
         raise Skip("no calibration")
     obs = Observations.from_clip(clip, court=ctx.court)
-    if len(obs.event_frames) < 2:
-        raise StageError(f"{clip.events_path}: needs at least two events to reconstruct a flight")
+    if not len(obs.event_frames):
+        raise StageError(f"{clip.events_path}: needs at least one event (a bounce or a hit) to anchor the flight")
     fit = reconstruct(obs, ctx.cfg.method)
     fit.save(clip)
     ok = sum(s.ok for s in fit.segments)
@@ -298,7 +298,10 @@ def _reconstruct_run(ctx: Context) -> Outcome:
         raise StageError(f"{clip.root}: no flight could be reconstructed ({reasons}) — check ball.csv and events.csv")
     # flights that cannot be fitted (too few detections between two events) are normal in a real rally: they
     # are listed in segments.json with their reason, and the run still counts as complete
-    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed")
+    pl = fit.extra.get("plausibility", {})
+    verdict = "" if not pl else (", plausible" if pl["plausible"] else
+                                 f", NOT plausible ({pl['frames_inside_court']:.0%} of frames inside the court)")
+    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed{verdict}")
 
 
 def _file(name: str) -> Callable[[Context], Path]:

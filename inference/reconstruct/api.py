@@ -7,8 +7,9 @@ import numpy as np
 
 from inference.court import Court
 
-from .joint import fit_joint, net_height
+from .joint import fit_joint
 from .observations import Observations
+from .plausibility import net_clearance, summary
 from .results import RallyFit, SegmentFit
 
 #: The default and the four published methods, in the order of the thesis's tables.
@@ -35,6 +36,8 @@ def reconstruct(obs: Observations, method: str = DEFAULT_METHOD) -> RallyFit:
     for seg in fit.segments:
         if seg.ok:
             seg.figures.update(shot_figures(seg, obs.court, obs.fps))
+    if "plausibility" not in fit.extra:
+        fit.extra["plausibility"] = summary(fit, obs)
     return fit
 
 
@@ -42,16 +45,9 @@ def shot_figures(seg: SegmentFit, court: Court, fps: float) -> dict:
     """Net clearance (m, where the flight crosses the net plane); for a flight ending on the floor, the
     bounce position (m) and the speed at the bounce (km/h)."""
     out: dict = {}
-    nets = [p for p in court.planes if p.event == "net"]
-    if nets and len(seg.xyz) > 1:
-        net = nets[0]
-        d = (seg.xyz - net.origin) @ net.normal
-        cross = np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0)
-        if len(cross):
-            k = int(cross[0])
-            f = d[k] / (d[k] - d[k + 1])
-            p = seg.xyz[k] + f * (seg.xyz[k + 1] - seg.xyz[k])
-            out["net_clearance_m"] = round(float(p[2] - court.ball.radius - net_height(net, p)), 3)
+    clearance = net_clearance(court, seg.xyz, beside_ok=False)
+    if np.isfinite(clearance):
+        out["net_clearance_m"] = round(clearance, 3)
     if seg.end_plane is not None and seg.end is not None:
         plane = court.plane(seg.end_plane)
         if plane.event == "ground":

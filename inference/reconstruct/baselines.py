@@ -512,7 +512,7 @@ def fit_rally(obs: Observations, method: str) -> RallyFit:
         raise ValueError(f"unknown baseline {method!r}; choose one of {sorted(BASELINES)}")
     fit = BASELINES[method]
     t0 = time.perf_counter()
-    priors = contact_priors(obs)
+    priors = contact_priors(obs, unbounded_ok=False)  # the published methods as published
     segments = obs.segments()
     fits = [fit(obs, priors, seg) for seg in segments]
     extra = {}

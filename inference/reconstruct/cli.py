@@ -31,8 +31,8 @@ def run_reconstruct(args: argparse.Namespace) -> int:
 
     clip = Clip(args.clip)
     obs = Observations.from_clip(clip, camera=clip.read_camera(gt=args.gt_camera))
-    if len(obs.event_frames) < 2:
-        raise ValueError(f"{clip.events_path}: needs at least two events to reconstruct a flight")
+    if not len(obs.event_frames):
+        raise ValueError(f"{clip.events_path}: needs at least one event (a bounce or a hit) to anchor the flight")
     fit = reconstruct(obs, args.method)
     fit.save(clip)
     print(f"{clip.root.name}: method {fit.method}, {len(fit.segments)} flights, {fit.n_frames} frames in "
@@ -45,9 +45,16 @@ def run_reconstruct(args: argparse.Namespace) -> int:
             continue
         d = s.to_dict(fit.fps)
         net = d.get("net_clearance_m")
-        print(f"{seg.index:>6} {seg.start:>4}-{seg.end:<4} {seg.start_event:>12} {seg.end_event:>12} "
+        print(f"{seg.index:>6} {seg.start:>4}-{seg.end:<4} {seg.start_event or '(free end)':>12} "
+              f"{seg.end_event or '(free end)':>12} "
               f"{d.get('launch_speed_kmh', float('nan')):>11.1f} {'' if net is None else f'{net:.2f}':>6} "
               f"{s.reproj_rms_px:>7.2f}")
+    pl = fit.extra.get("plausibility", {})
+    if pl:
+        verdict = "plausible" if pl["plausible"] else "NOT plausible"
+        print(f"plausibility: {verdict} — {pl['reconstructed']}/{pl['flights']} flights reconstructed, "
+              f"{pl['frames_inside_court']:.1%} of frames inside the court, {pl['contacts_below_floor']} contacts "
+              f"below the floor")
     print(f"wrote {clip.ball_3d_path} and {clip.segments_path}")
     return 0
 

@@ -10,19 +10,24 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from inference.camera import Camera
-from inference.clipio import BallTrack, Clip, HitEvents, PlayerTracks
+from inference.clipio import BallTrack, Clip, FormatError, HitEvents, PlayerTracks
+from inference.clipio.csvfiles import separate_same_frame
 from inference.court import Court, Plane, load_court
 from inference.geometry import intersect_planes
+from inference.skeleton import COCO17
 
 PLAYER_EVENTS = ("player_near", "player_far")
 #: frames searched for a 2D ball around a surface contact when none is within 2 frames (the fit moves the
 #: contact point on its surface, so a rough first guess is enough)
 FAR_GAP = 10
+#: COCO-17 indices of the wrists (the hitter's hand height when players.csv has poses)
+WRISTS = (COCO17.index("left_wrist"), COCO17.index("right_wrist"))
 
 
 @dataclass
@@ -49,11 +54,15 @@ class Observations:
 
     def __post_init__(self) -> None:
         self.uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)
-        self.event_frames = np.asarray(self.event_frames, dtype=np.int64)
-        if len(self.event_frames) != len(self.event_labels):
+        self.uv[~np.isfinite(self.uv).all(axis=1)] = np.nan
+        frames = np.asarray(self.event_frames, dtype=np.int64).reshape(-1)
+        if len(frames) != len(self.event_labels):
             raise ValueError("event_frames and event_labels must have the same length")
-        if len(self.event_frames) > 1 and np.any(np.diff(self.event_frames) <= 0):
-            raise ValueError("event frames must be strictly increasing")
+        # events on one frame (or out of order): sorted, each moved to its own frame as events.csv's reader does
+        frames, labels, _ = separate_same_frame(frames, np.asarray(self.event_labels, dtype=object),
+                                                len(self.uv) or None)
+        self.event_frames = frames
+        self.event_labels = [str(x) for x in labels]
 
     @property
     def n_frames(self) -> int:
@@ -74,9 +83,13 @@ class Observations:
         """Read camera.yaml, ball.csv, events.csv and players.csv (if present) of a clip."""
         court = court or load_court(clip.court_path())
         camera = camera or clip.read_camera()
-        players = clip.read_players(missing_ok=True)
+        try:  # players.csv is optional: a file that cannot be read costs the hitter prior, not the rally
+            players = clip.read_players(missing_ok=True)
+        except FormatError as err:
+            warnings.warn(f"{err}; reconstructing without players' positions", stacklevel=2)
+            players = None
         return cls.from_tables(court, camera, clip.info.fps, clip.read_ball(), clip.read_events(), clip.n_frames,
-                               players if len(players) else None, str(clip.root))
+                               players if players is not None and len(players) else None, str(clip.root))
 
     def with_track(self, uv: np.ndarray) -> Observations:
         """The same rally with other 2D positions (e.g. noisy or detected)."""
@@ -94,14 +107,15 @@ class Segment:
     """The ball's flight from one contact (event) to the next.
 
     Attributes:
-        index: position in the rally; start, end: event frames; start_event, end_event: their labels.
+        index: position in the rally; start, end: event frames; start_event, end_event: their labels (None
+            for a free end: the flight before the first event or after the last one).
     """
 
     index: int
     start: int
     end: int
-    start_event: str
-    end_event: str
+    start_event: str | None
+    end_event: str | None
 
     @property
     def frames(self) -> np.ndarray:
@@ -124,6 +138,8 @@ class ContactPrior:
         plane: the surface touched (for ``plane`` contacts whose line of sight meets one), else None.
         candidates: the planes the label allows.
         hitter_xy: (2,) the hitter's court position for a racket hit when players.csv has it.
+        hand_z: the hitter's hand (wrist) height (m) when players.csv has a pose for that frame, else None.
+        outside: the line of sight misses the surface's extent: the point is on the unbounded plane.
         reason: why no point could be made (empty when fine).
     """
 
@@ -134,6 +150,8 @@ class ContactPrior:
     plane: Plane | None = None
     candidates: list[Plane] = field(default_factory=list)
     hitter_xy: np.ndarray | None = None
+    hand_z: float | None = None
+    outside: bool = False
     reason: str = ""
 
     @property
@@ -153,22 +171,51 @@ def nearest_observed(uv: np.ndarray, frame: int, max_gap: int = 2) -> tuple[np.n
 def hitter_position(obs: Observations, frame: int, label: str) -> np.ndarray | None:
     """(2,) the court position of the hitter of a racket hit: the player of the named team nearest to the
     ball's line of sight at that frame (players.csv), or None."""
+    row = hitter_row(obs, frame, label)
+    return None if row is None else obs.players.court_xy[row]
+
+
+def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
+    """players.csv row of the hitter of a racket hit at ``frame`` (see :func:`hitter_position`): players of
+    the named team, or, where players.csv has no team, on that side of the net."""
     if obs.players is None or label not in PLAYER_EVENTS:
         return None
     team = label.split("_")[1]
     p = obs.players
-    rows = np.flatnonzero((p.frame == frame) & (p.team == team) & np.isfinite(p.court_xy).all(axis=1))
+    here = np.flatnonzero((p.frame == frame) & np.isfinite(p.court_xy).all(axis=1))
+    side = np.where(p.court_xy[here, 1] < obs.court.net_y, "near", "far")
+    rows = here[(p.team[here] == team) | ((p.team[here] == "") & (side == team))]
     if not len(rows):
         return None
     uv, _ = nearest_observed(obs.uv, frame)
     if uv is None or len(rows) == 1:
-        return p.court_xy[rows[0]]
+        return int(rows[0])
     o, d = obs.camera.rays(uv[None])
     # distance from each candidate (at 1 m height) to the line of sight
     X = np.column_stack([p.court_xy[rows], np.ones(len(rows))])
     v = X - o
     dist = np.linalg.norm(v - (v @ d[0])[:, None] * d, axis=1)
-    return p.court_xy[rows[int(np.argmin(dist))]]
+    return int(rows[int(np.argmin(dist))])
+
+
+def hand_height(obs: Observations, row: int, uv: np.ndarray | None) -> float | None:
+    """Height (m) of the hitter's hand nearest the ball in the image: the wrist's line of sight meets the
+    upright plane through the player's court position facing the camera. None without a usable wrist."""
+    p = obs.players
+    kp = p.keypoints[row, list(WRISTS)]                                   # (2, 3) normalised x, y, score
+    ok = np.isfinite(kp).all(axis=1) & (kp[:, 2] > 0.3)
+    if not ok.any():
+        return None
+    px = kp[ok, :2] * np.asarray(obs.camera.image_size, float)
+    w = px[int(np.argmin(np.linalg.norm(px - uv, axis=1)))] if uv is not None else px[0]
+    o, d = obs.camera.rays(w[None])
+    foot = np.array([*p.court_xy[row], 0.0])
+    n = foot - obs.camera.centre
+    n[2] = 0.0
+    if np.linalg.norm(n) < 1e-6 or abs(d[0] @ n) < 1e-9:
+        return None
+    z = float((o[0] + ((foot - o[0]) @ n) / (d[0] @ n) * d[0])[2])
+    return z if 0.0 <= z <= 3.5 else None
 
 
 def hit_point_guess(obs: Observations, uv: np.ndarray, hitter_xy: np.ndarray | None) -> np.ndarray:
@@ -194,35 +241,47 @@ def hit_point_guess(obs: Observations, uv: np.ndarray, hitter_xy: np.ndarray | N
     return p
 
 
-def contact_priors(obs: Observations) -> list[ContactPrior]:
-    """One :class:`ContactPrior` per event: surface contacts from the line of sight ∩ the label's planes
-    (ball radius included, first valid plane of a group), racket hits from the hitter or a height prior."""
-    out = []
+def unbounded(plane: Plane) -> Plane:
+    """The same plane without its extent (a landing beyond the court polygon)."""
+    big = 1e4
+    return replace(plane, polygon=np.array([[-big, -big], [big, -big], [big, big], [-big, big]]))
+
+
+def contact_priors(obs: Observations, unbounded_ok: bool = True) -> list[ContactPrior]:
+    """One :class:`ContactPrior` per event (:func:`contact_prior`)."""
+    return [contact_prior(obs, frame, label, unbounded_ok)
+            for frame, label in zip(obs.event_frames.tolist(), obs.event_labels)]
+
+
+def contact_prior(obs: Observations, frame: int, label: str, unbounded_ok: bool = True) -> ContactPrior:
+    """What is known of a contact at ``frame`` with event ``label``: a surface contact from the line of sight ∩
+    the label's planes (ball radius included, first valid plane of a group; with ``unbounded_ok`` a line of
+    sight that misses every extent falls back to the unbounded plane, flagged ``outside``), a racket hit from
+    its hitter or a height prior."""
     r = obs.court.ball.radius
-    for frame, label in zip(obs.event_frames.tolist(), obs.event_labels):
-        uv, _ = nearest_observed(obs.uv, frame)
-        if label in PLAYER_EVENTS:
-            hitter = hitter_position(obs, frame, label)
-            point = hit_point_guess(obs, uv, hitter) if uv is not None else np.full(3, np.nan)
-            reason = "" if uv is not None else "no 2D ball near the hit frame"
-            out.append(ContactPrior(frame, label, "hit", point, hitter_xy=hitter, reason=reason))
-            continue
-        planes = obs.court.planes_for(label)
-        if not planes:
-            out.append(ContactPrior(frame, label, "plane", np.full(3, np.nan),
-                                    reason=f"court {obs.court.name} has no surface for event {label!r}"))
-            continue
-        if uv is None:  # e.g. a bounce on the near glass right under the camera: use a farther frame
-            uv, _ = nearest_observed(obs.uv, frame, max_gap=FAR_GAP)
-        if uv is None:
-            out.append(ContactPrior(frame, label, "plane", np.full(3, np.nan), candidates=planes,
-                                    reason=f"no 2D ball within {FAR_GAP} frames of the event"))
-            continue
-        o, d = obs.camera.rays(uv[None])
-        hit = intersect_planes(o, d, planes, offset=r)
-        if hit.valid[0]:
-            out.append(ContactPrior(frame, label, "plane", hit.points[0], planes[hit.plane_index[0]], planes))
-        else:
-            out.append(ContactPrior(frame, label, "plane", np.full(3, np.nan), candidates=planes,
-                                    reason=f"the line of sight at frame {frame} misses every {label} surface"))
-    return out
+    uv, _ = nearest_observed(obs.uv, frame)
+    if label in PLAYER_EVENTS:
+        row = hitter_row(obs, frame, label)
+        hitter = None if row is None else obs.players.court_xy[row]
+        point = hit_point_guess(obs, uv, hitter) if uv is not None else np.full(3, np.nan)
+        reason = "" if uv is not None else "no 2D ball near the hit frame"
+        hand = hand_height(obs, row, uv) if row is not None else None
+        return ContactPrior(frame, label, "hit", point, hitter_xy=hitter, hand_z=hand, reason=reason)
+    planes = obs.court.planes_for(label)
+    if not planes:
+        return ContactPrior(frame, label, "plane", np.full(3, np.nan),
+                            reason=f"court {obs.court.name} has no surface for event {label!r}")
+    if uv is None:  # e.g. a bounce on the near glass right under the camera: use a farther frame
+        uv, _ = nearest_observed(obs.uv, frame, max_gap=FAR_GAP)
+    if uv is None:
+        return ContactPrior(frame, label, "plane", np.full(3, np.nan), plane=planes[0], candidates=planes,
+                            reason=f"no 2D ball within {FAR_GAP} frames of the event")
+    o, d = obs.camera.rays(uv[None])
+    hit = intersect_planes(o, d, planes, offset=r)
+    if hit.valid[0]:
+        return ContactPrior(frame, label, "plane", hit.points[0], planes[hit.plane_index[0]], planes)
+    wide = intersect_planes(o, d, [unbounded(p) for p in planes], offset=r) if unbounded_ok else hit
+    if wide.valid[0]:
+        return ContactPrior(frame, label, "plane", wide.points[0], planes[wide.plane_index[0]], planes, outside=True)
+    return ContactPrior(frame, label, "plane", np.full(3, np.nan), plane=planes[0], candidates=planes,
+                        reason=f"the line of sight at frame {frame} misses every {label} surface")

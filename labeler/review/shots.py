@@ -425,6 +425,31 @@ def net_clearance(court: Court, xyz: np.ndarray) -> float:
     return float(p[2] - court.ball.radius - net_height(net, p))
 
 
+#: a tennis serve is struck overhead: its hit is at least this high (m); a rally shot rarely is
+OVERHEAD_SERVE_M = 1.8
+#: a padel serve's drop falls from the hand: slower than this horizontally (m/s) before the hit
+DROP_SPEED_MS = 3.0
+
+
+def looks_like_serve(rules: CourtRules, traj: Trajectory, team: str, hit: Contact, pre: list[Contact],
+                     fps: float) -> bool:
+    """Whether the clip's first hit shows a serve's set-up, so that it is judged as a serve (clips cut
+    mid-rally are normal: without the set-up the first hit is a rally shot). Padel: nothing before it but
+    the drop's floor bounce on the server's side, and the ball slow horizontally over the 0.4 s before the
+    hit (dropped from the hand, not arriving from the other side; at least 3 frames of the 3D track show
+    it). Tennis: nothing before it and an overhead hit."""
+    if rules.sport != "padel":
+        return not pre and float(hit.position[2]) >= OVERHEAD_SERVE_M
+    if len(pre) > 1 or (pre and (pre[0].event != "ground" or not pre[0].known
+                                 or rules.side_of(float(pre[0].position[1])) != team)):
+        return False
+    frames, xyz = traj.window(hit.frame - int(round(0.4 * fps)), hit.frame - 1)
+    if len(frames) < 3:
+        return False
+    speed = np.linalg.norm(np.diff(xyz[:, :2], axis=0), axis=1) / (np.diff(frames) / fps)
+    return bool(speed.max() < DROP_SPEED_MS)
+
+
 def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: float, *,
                   rules: CourtRules | None = None, first_hit_is_serve: bool = True) -> RallyAnalysis:
     """Split a rally's contacts into shots and compute every figure and call.
@@ -434,7 +459,8 @@ def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: 
         fps: frame rate.
         rules: line-call geometry (default from ``court``).
         first_hit_is_serve: treat the clip's first hit as the serve when its hitter stands behind their
-            service line (clips start at the serve); False judges every shot as a rally shot.
+            service line and the clip shows the serve's set-up (:func:`looks_like_serve`); False judges
+            every shot as a rally shot.
     """
     rules = rules or CourtRules.from_court(court)
     contacts = sorted(contacts, key=lambda c: c.frame)
@@ -450,7 +476,8 @@ def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: 
         end = contacts[j].frame if j < len(contacts) else max(last_frame, contacts[-1].frame)
         team = hit.event.removeprefix("player_")
         serve = (first_hit_is_serve and n == 0 and hit.known
-                 and rules.behind_service_line(team, float(hit.position[1])))
+                 and rules.behind_service_line(team, float(hit.position[1]))
+                 and looks_like_serve(rules, traj, team, hit, pre, fps))
         inner = contacts[i + 1: j]
         verdict, reason, calls = judge_shot(rules, team, inner, serve=serve, server_x=float(hit.position[0]),
                                             volleyed=j < len(contacts))

@@ -136,3 +136,20 @@ def test_camera_is_delegated_to_inference_camera(clip, monkeypatch):
     assert clip.read_camera().text == "P: []\n"
     clip.write_camera(FakeCamera("gt\n"), gt=True)
     assert clip.read_camera(gt=True).text == "gt\n"
+
+
+def test_csv_only_clip_counts_frames_from_its_tables(tmp_path):
+    """No video and no n_frames: the frame count comes from ball.csv / events.csv / players.csv."""
+    from inference.clipio import Clip
+
+    (tmp_path / "clip.yaml").write_text("sport: tennis\nfps: 25\nwidth: 1280\nheight: 720\nvideo: gone.mp4\n")
+    (tmp_path / "ball.csv").write_text("frame,visibility,x,y\n0,1,0.5,0.5\n57,1,0.4,0.4\n")
+    (tmp_path / "events.csv").write_text("frame,event\n12,player_near\n80,ground\n")
+    clip = Clip(tmp_path)
+    with pytest.warns(UserWarning, match="81 frames taken from the clip's tables"):
+        assert clip.n_frames == 81
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    (bare / "clip.yaml").write_text("sport: tennis\nfps: 25\nwidth: 1280\nheight: 720\nvideo: gone.mp4\n")
+    with pytest.raises(FormatError, match="no table names a frame"):
+        Clip(bare).n_frames

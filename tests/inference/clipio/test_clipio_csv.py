@@ -200,7 +200,6 @@ MALFORMED = [
         ["unknown event 'bounce'", "wall_near", "player_far"],
     ),
     ("events.csv", "frame,event\n3,ground\n7,player_nera\n", {}, 3, ["did you mean 'player_near'"]),
-    ("events.csv", "frame,event\n3,ground\n3,net\n", {}, 3, ["duplicate frame 3"]),
     ("events.csv", "frame,event\n3,ground\n50,net\n", {"n_frames": 50}, 3, ["beyond the video"]),
     (
         "court_points.csv",
@@ -302,3 +301,16 @@ def test_atomic_writes_get_normal_permissions(tmp_path):
     finally:
         os.umask(old)
     assert path.stat().st_mode & 0o777 == 0o644
+
+
+def test_events_on_one_frame_are_kept_in_order(tmp_path):
+    """A floor-then-glass corner bounce written on one frame: both kept, the later row a frame later."""
+    path = tmp_path / "events.csv"
+    path.write_text("frame,event\n9,player_near\n3,ground\n3,wall_left\n4,net\n")
+    with pytest.warns(UserWarning, match="wall_left 3 → 4"):
+        ev = read_events_csv(path)
+    assert ev.frame.tolist() == [3, 4, 5, 9] and ev.event.tolist() == ["ground", "wall_left", "net", "player_near"]
+    path.write_text("frame,event\n8,ground\n9,net\n9,player_far\n")
+    with pytest.warns(UserWarning):
+        ev = read_events_csv(path, n_frames=10)  # no frame after 9: the events before move back
+    assert ev.frame.tolist() == [7, 8, 9] and ev.event.tolist() == ["ground", "net", "player_far"]

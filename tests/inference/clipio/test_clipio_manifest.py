@@ -49,3 +49,20 @@ def test_bad_manifests(tmp_path):
         Manifest.load(tmp_path)
     with pytest.raises(ValueError):
         ManifestEntry("a", "dev")
+
+
+def test_clips_listed_by_name(tmp_path):
+    """Another tool's manifest names its clip folders with `name:` (or bare strings)."""
+    from inference.clipio import Manifest
+
+    for name in ("rally_a", "rally_b", "rally_c"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "clip.yaml").write_text("sport: padel\nfps: 25\nwidth: 640\nheight: 360\nvideo: v.mp4\n")
+    (tmp_path / "manifest.yaml").write_text(
+        "clips:\n  - {name: rally_a, split: test}\n  - name: rally_b\n  - rally_c\n")
+    m = Manifest.load(tmp_path)
+    assert [c.path for c in m.clips] == ["rally_a", "rally_b", "rally_c"]
+    assert [c.split for c in m.clips] == ["test", "train", "train"]
+    (tmp_path / "manifest.yaml").write_text("clips:\n  - {split: test}\n")
+    with pytest.raises(Exception, match="needs a `path` \\(or `name`\\)"):
+        Manifest.load(tmp_path)

@@ -74,8 +74,33 @@ def test_malformed(tmp_path, rows, line, words):
     assert f"players.csv, line {line}" in str(e.value) and words in str(e.value)
 
 
-def test_missing_keypoint_columns(tmp_path):
+def test_missing_keypoint_columns_are_unknown_with_a_warning(tmp_path):
     path = tmp_path / "players.csv"
-    path.write_text(",".join(BASE_COLUMNS) + "\n")
-    with pytest.raises(FormatError, match="missing column"):
+    path.write_text(",".join(BASE_COLUMNS) + "\n" + ",".join(["3", "1", "far", "0.9"] + ["0.5"] * 4 + ["4", "15"]) + "\n")
+    with pytest.warns(UserWarning, match="51 keypoint columns"):
+        t = read_players_csv(path)
+    assert t.court_xy.tolist() == [[4.0, 15.0]] and t.team.tolist() == ["far"]
+    assert np.isnan(t.keypoints).all()
+
+
+def test_foreign_tracker_layout(tmp_path):
+    """Another tracker's ``frame,track_id,team,x_m,y_m`` (teams A/B): read for what it has, one warning."""
+    path = tmp_path / "players.csv"
+    path.write_text("frame,track_id,team,x_m,y_m\n0,7,A,5.0,1.5\n0,9,B,4.0,18.0\n1,7,A,5.1,1.6\n")
+    with pytest.warns(UserWarning) as rec:
+        t = read_players_csv(path, n_frames=10)
+    msg = str(rec[0].message)
+    assert len(rec) == 1 and "another layout" in msg and "x1" in msg and "['A', 'B']" in msg
+    assert t.player_id.tolist() == [7, 9, 7] and t.team.tolist() == ["", "", ""]
+    np.testing.assert_allclose(t.court_xy, [[5.0, 1.5], [4.0, 18.0], [5.1, 1.6]])
+    assert np.isnan(t.bbox).all() and np.isnan(t.score).all()
+
+
+def test_foreign_layout_still_refuses_what_is_wrong(tmp_path):
+    path = tmp_path / "players.csv"
+    path.write_text("frame,track_id,x_m,y_m\n0,7,5.0,abc\n")
+    with pytest.raises(FormatError, match="line 2.*not a number"):
+        read_players_csv(path)
+    path.write_text("track_id,x_m,y_m\n7,5.0,1.0\n")
+    with pytest.raises(FormatError, match="missing column.*frame"):
         read_players_csv(path)

@@ -93,3 +93,16 @@ def test_clip_info_validates(kwargs):
     args = dict(sport="padel", fps=30.0, width=64, height=48, video="video.mp4") | kwargs
     with pytest.raises(ValueError):
         ClipInfo(**args)
+
+
+def test_source_may_be_any_yaml_value(tmp_path):
+    """Provenance from other tools: a mapping (or list) `source` is read and written back as written."""
+    from inference.clipio import read_clip_yaml, write_clip_yaml
+
+    path = tmp_path / "clip.yaml"
+    path.write_text("sport: padel\nfps: 25\nwidth: 1920\nheight: 1080\nvideo: match.mp4\n"
+                    "source:\n  url: https://example.org/match\n  start_s: 812.4\n  cameras: [main, side]\n")
+    info = read_clip_yaml(path)
+    assert info.source == {"url": "https://example.org/match", "start_s": 812.4, "cameras": ["main", "side"]}
+    write_clip_yaml(tmp_path / "again.yaml", info)
+    assert read_clip_yaml(tmp_path / "again.yaml").source == info.source

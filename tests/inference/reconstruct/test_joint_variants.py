@@ -65,7 +65,7 @@ def test_grouped_event_class_is_resolved(draggy_clip):
               for lab in obs.event_labels]
     grouped = Observations(obs.court, obs.camera, obs.fps, obs.uv, obs.event_frames, labels, obs.players)
     fit = fit_joint(grouped)
-    planes = {s.segment.end: s.end_plane for s in fit.segments if s.ok}
+    planes = {s.segment.end: s.end_plane for s in fit.segments if s.ok and s.segment.end_event is not None}
     truth = dict(zip(obs.event_frames.tolist(), obs.event_labels))
     resolved = {f: p for f, p in planes.items() if truth[f] == "ground"}
     assert resolved and all(p == "floor" for p in resolved.values())

@@ -158,9 +158,11 @@ def test_analyse_rally_speeds_net_clearance_and_serve_detection():
     xyz1[:, 2] += 1.2 * np.sin(np.linspace(0, np.pi, len(f1)))  # an arc over the net
     f2 = np.arange(41, 46)
     xyz2 = _line_path((3, 15.2, 0.3), (3, 16, 0.8), f2)
-    traj = Trajectory(np.r_[f1, f2], np.vstack([xyz1, xyz2]))
-    contacts = [Contact(10, "player_near", xyz1[0]), Contact(40, "ground", xyz1[-1], "floor"),
-                Contact(45, "player_far", xyz2[-1])]
+    f0 = np.arange(0, 10)                                      # the drop from the hand, its bounce at frame 5
+    xyz0 = np.column_stack([np.full(10, 7.0), np.full(10, 2.0), np.abs(f0 - 5) * 0.15 + R])
+    traj = Trajectory(np.r_[f0, f1, f2], np.vstack([xyz0, xyz1, xyz2]))
+    contacts = [Contact(5, "ground", xyz0[5], "floor"), Contact(10, "player_near", xyz1[0]),
+                Contact(40, "ground", xyz1[-1], "floor"), Contact(45, "player_far", xyz2[-1])]
     a = analyse_rally(court, traj, contacts, fps)
     s0, s1 = a.shots
     assert s0.serve and not s1.serve and s0.verdict == "in" and s0.first_bounce.target == "far left service box"
@@ -174,8 +176,13 @@ def test_analyse_rally_speeds_net_clearance_and_serve_detection():
     assert s0.net_clearance_m == pytest.approx(p[2] - R - top, abs=1e-3)
     assert net_clearance(court, xyz1[:5]) != net_clearance(court, xyz1[:5])  # NaN: no crossing
     # a first hit in front of the service line is not a serve (the clip started mid-rally)
-    contacts[0] = Contact(10, "player_near", (7, 5, 0.8))
-    assert not analyse_rally(court, traj, contacts, fps).shots[0].serve
+    moved = [contacts[0], Contact(10, "player_near", (7, 5, 0.8)), *contacts[2:]]
+    assert not analyse_rally(court, traj, moved, fps).shots[0].serve
+    # a clip cut mid-rally: the ball came over from the far side and bounced before the first hit
+    incoming = Trajectory(traj.frame, np.vstack([_line_path((3, 9, 1.5), (7, 2, R), f0), xyz1, xyz2]))
+    assert not analyse_rally(court, incoming, contacts, fps).shots[0].serve
+    late = Trajectory(traj.frame[10:], traj.xyz[10:])        # the track starts at the hit: no set-up seen
+    assert not analyse_rally(court, late, contacts[1:], fps).shots[0].serve
 
 
 @pytest.mark.parametrize("sport", ["padel", "tennis"])

@@ -1,0 +1,264 @@
+"""What the court allows, checked on a fitted rally: per-flight checks, the contact hypotheses tried for a
+flight that fails them, and the clip-level plausibility summary written to segments.json.
+
+A flight is *plausible* when its reprojection RMS is at most ``rms_fail_factor`` × the 2D noise, no frame
+of it lies more than 5 cm below the floor or behind a glass/mesh patch (padel's enclosure; the open sides
+and the space above the walls are allowed) and it does not pass through the net without a net event.
+
+Example:
+    >>> fit = reconstruct(obs)
+    >>> fit.extra["plausibility"]        # {"plausible": True, "frames_inside_court": 1.0, ...}
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from inference.court import Court
+
+from .observations import PLAYER_EVENTS, Observations, contact_prior
+
+if TYPE_CHECKING:
+    from .joint import ChainFit, JointConfig, Plan
+    from .results import RallyFit
+    from .shooting import Problem, Solution
+
+#: how deep (m) a frame may sink into the floor or a wall before the flight is implausible
+PENETRATION_LIMIT_M = 0.05
+#: tolerance (m) of the clip-level "inside the court" figure
+INSIDE_TOLERANCE_M = 0.02
+
+
+def court_walls(court: Court) -> list:
+    """The surfaces the ball cannot pass through besides the floor: glass and mesh patches."""
+    return [p for p in court.planes if not p.two_sided and p.event != "ground" and p.material in ("glass", "mesh")]
+
+
+def penetration(court: Court, xyz: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """(M,) how deep (m, ≥ 0) each ball centre sinks below the floor or behind a wall patch (the ball's
+    radius included), and the name of the surface for each (empty where none)."""
+    r = court.ball.radius
+    depth = np.maximum(r - xyz[:, 2], 0.0)
+    where = np.where(depth > 0, "floor", "").astype(object)
+    for wall in court_walls(court):
+        d = np.maximum(r - (xyz - wall.origin) @ wall.normal, 0.0)
+        d = np.where(wall.contains(xyz, tol=0.05), d, 0.0)
+        deeper = d > depth
+        depth = np.where(deeper, d, depth)
+        where = np.where(deeper, wall.name, where)
+    return depth, [str(w) for w in where]
+
+
+@dataclass
+class FlightCheck:
+    """One fitted flight of a chain against the court's rules.
+
+    Attributes:
+        ok: plausible; reason: why not.
+        first, last: the frames it covers; rms_px: reprojection RMS over its observed frames (NaN: none);
+        n_observed: its 2D points; depth_m: the deepest penetration of the floor or a wall.
+    """
+
+    ok: bool
+    reason: str
+    first: int
+    last: int
+    rms_px: float
+    n_observed: int
+    depth_m: float = 0.0
+
+
+def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[FlightCheck]:
+    """One :class:`FlightCheck` per flight of the chain."""
+    problem.evaluate(sol.theta, jac=False)        # residuals at the solution
+    fl, taus = sol.aux["flights"], sol.aux["taus"]
+    frames, own, j = problem.frame_positions(fl, taus)
+    xyz = fl.P[own, 0, j]
+    court = problem.obs.court
+    depth, where = penetration(court, xyz)
+    obs_own = problem.owners(problem.frames, taus)
+    err = problem.last_norm * cfg.pixel_sigma
+    live = problem.weights > 0
+    limit = cfg.rms_fail_factor * cfg.pixel_sigma
+    out = []
+    ch = problem.chain
+    for s, f in enumerate(ch.flights):
+        m = own == s
+        if not m.any():
+            out.append(FlightCheck(True, "", 0, -1, float("nan"), 0))
+            continue
+        first, last = int(frames[m][0]), int(frames[m][-1])
+        e = err[(obs_own == s) & live]
+        rms = float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")
+        reasons = []
+        if len(e) and rms > limit:
+            reasons.append(f"reprojection RMS {rms:.1f} px > {cfg.rms_fail_factor:g} × the 2D noise "
+                           f"({cfg.pixel_sigma:g} px)")
+        k = int(np.argmax(np.where(m, depth, -1.0)))
+        if depth[k] > PENETRATION_LIMIT_M:
+            reasons.append(f"passes {depth[k]:.2f} m {'below the floor' if where[k] == 'floor' else 'behind the ' + where[k]}"
+                           f" at frame {frames[k]}")
+        labels = [ch.contacts[f.start].label] + ([ch.contacts[f.end].label] if f.end is not None else [])
+        clearance = net_clearance(court, xyz[m])
+        if "net" not in labels and clearance < -PENETRATION_LIMIT_M:
+            reasons.append(f"passes through the net ({clearance:.2f} m below its top)")
+        out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e),
+                               float(depth[m].max())))
+    return out
+
+
+def net_crossing(court: Court, xyz: np.ndarray):
+    """Where a path (K, 3) first crosses the net's plane: ((3,) point, the net plane), or None."""
+    nets = [p for p in court.planes if p.event == "net"]
+    if not nets or len(xyz) < 2:
+        return None
+    net = nets[0]
+    d = (xyz - net.origin) @ net.normal
+    cross = np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0)
+    if not len(cross):
+        return None
+    k = int(cross[0])
+    f = d[k] / (d[k] - d[k + 1])
+    return xyz[k] + f * (xyz[k + 1] - xyz[k]), net
+
+
+def net_clearance(court: Court, xyz: np.ndarray, beside_ok: bool = True) -> float:
+    """Ball bottom above the net's top (m) where a path (K, 3) crosses the net plane; inf where it does not
+    (or, with ``beside_ok``, passes beside the posts)."""
+    from .shooting import net_height
+
+    hit = net_crossing(court, xyz)
+    if hit is None:
+        return float("inf")
+    p, net = hit
+    x = (p - net.origin) @ net.u
+    if beside_ok and (x < net.polygon[:, 0].min() or x > net.polygon[:, 0].max()):
+        return float("inf")
+    return float(p[2] - court.ball.radius - net_height(net, p))
+
+
+# ---------------------------------------------------------------------------------------------------
+# Hypotheses for a flight that fails
+# ---------------------------------------------------------------------------------------------------
+def _bounce_label(court: Court) -> str:
+    """The label of an inserted surface contact: the court's group of floor-and-walls when it has one (the
+    line of sight then picks the surface), else ``ground``."""
+    for name, members in court.event_groups.items():
+        if "ground" in members:
+            return name
+    return "ground"
+
+
+def _kink_frames(obs: Observations, first: int, last: int, residual_frames: np.ndarray,
+                 residuals: np.ndarray) -> list[int]:
+    """Where a missed contact most likely is: the sharpest turn of the 2D track and the worst-fitted frame,
+    at least 2 frames from the flight's ends."""
+    out = []
+    f = np.arange(first + 2, last - 1)
+    if len(f):
+        acc = obs.uv[f + 1] - 2 * obs.uv[f] + obs.uv[f - 1]
+        a = np.linalg.norm(acc, axis=1)
+        if np.isfinite(a).any():
+            out.append(int(f[int(np.nanargmax(a))]))
+    m = (residual_frames >= first + 2) & (residual_frames <= last - 2)
+    if m.any():
+        out.append(int(residual_frames[m][int(np.argmax(residuals[m]))]))
+    return list(dict.fromkeys(out))
+
+
+def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
+    """Plans to try for flight ``k`` of a fitted chain that fails its checks (yielded lazily, most likely
+    first): a missed bounce inside it, another surface or event class at its contacts, no contact at all."""
+    from .joint import Plan, PlanContact
+
+    pb = fit.problem
+    ch = pb.chain
+    f = ch.flights[k]
+    chk = fit.checks[k]
+    contacts = list(fit.plan.contacts)
+    why = chk.reason
+
+    def plan_with(new: list, note: tuple[int, str]) -> Plan:
+        return Plan(new, [*fit.plan.notes, note])
+
+    # 1. a missed bounce inside the flight
+    label = _bounce_label(obs.court)
+    for frame in _kink_frames(obs, chk.first, chk.last, pb.frames, pb.last_norm):
+        prior = contact_prior(obs, frame, label)
+        if not prior.ok:
+            continue
+        note = f"contact inserted at frame {frame} ({prior.plane.name}): the flight over frames {chk.first}–" \
+               f"{chk.last} did not fit as one ({why})"
+        pos = sum(c.prior.frame < frame for c in contacts)
+        yield plan_with(contacts[:pos] + [PlanContact(prior, None, note)] + contacts[pos:], (frame, note))
+    # 2. another surface or event class at its contacts; 3. no contact there at all
+    ends = [f.start] + ([f.end] if f.end is not None else [])
+    for c in ends:
+        pc = contacts[c]
+        old = pc.prior
+        for lab in _other_labels(obs, old):
+            prior = contact_prior(obs, old.frame, lab)
+            if not prior.ok:
+                continue
+            note = f"event at frame {old.frame} fitted as {lab} instead of {old.label} ({why})"
+            yield plan_with(contacts[:c] + [replace(pc, prior=prior, note=note)] + contacts[c + 1:],
+                            (old.frame, note))
+    for c in ends:
+        if len(contacts) > 1:
+            old = contacts[c].prior
+            note = f"event {old.label} at frame {old.frame} fitted as no contact ({why})"
+            yield plan_with(contacts[:c] + contacts[c + 1:], (old.frame, note))
+
+
+def _other_labels(obs: Observations, prior) -> list[str]:
+    """Labels to try instead of ``prior.label``: the other surfaces the line of sight reaches, a racket hit
+    for a surface contact (by side of the net) and a floor contact for a racket hit."""
+    court = obs.court
+    if prior.label in PLAYER_EVENTS:
+        return [_bounce_label(court)]
+    out = []
+    current = {p.event for p in court.planes_for(prior.label)}
+    for lab in court.event_labels:
+        if lab in current or lab in PLAYER_EVENTS:
+            continue
+        if contact_prior(obs, prior.frame, lab, unbounded_ok=False).ok:
+            out.append(lab)
+    y = prior.point[1] if prior.ok else obs.court.net_y - 1
+    out.append("player_near" if y < court.net_y else "player_far")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# The clip-level summary
+# ---------------------------------------------------------------------------------------------------
+def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None) -> dict:
+    """Clip-level plausibility of a reconstruction (segments.json's ``plausibility``): flights reconstructed
+    and failed (with reasons), the share of frames inside the court, contacts below the floor, the worst
+    reprojection RMS, flagged contacts, and ``plausible`` when nothing is off."""
+    court = obs.court
+    ok = [s for s in fit.segments if s.ok]
+    b = fit.ball_3d()
+    inside = 1.0
+    if len(b):
+        depth, _ = penetration(court, b.xyz)
+        inside = float(np.mean(depth <= INSIDE_TOLERANCE_M))
+    r = court.ball.radius
+    contacts = [p for s in ok for p in (s.start, s.end) if p is not None]
+    below = int(sum(float(p[2]) < r - INSIDE_TOLERANCE_M for p in contacts))
+    rms = [s.reproj_rms_px for s in ok if np.isfinite(s.reproj_rms_px)]
+    over = int(sum(x > rms_limit_px for x in rms)) if rms_limit_px else 0
+    flags = [f for s in ok for f in s.figures.get("flags", [])]
+    reasons = Counter(s.reason for s in fit.segments if not s.ok)
+    out = {
+        "flights": len(fit.segments), "reconstructed": len(ok), "failed": len(fit.segments) - len(ok),
+        "failure_reasons": dict(reasons), "frames": len(b), "frames_inside_court": round(inside, 4),
+        "contacts_below_floor": below, "max_reprojection_rms_px": round(max(rms), 2) if rms else None,
+        "flags": flags,
+    }
+    if rms_limit_px:
+        out["flights_over_rms_limit"] = over
+    out["plausible"] = bool(ok) and inside >= 0.98 and below == 0 and over == 0
+    return out

@@ -1,0 +1,844 @@
+"""Multiple shooting over a chain of flights: the layout of the unknowns, the batched flights, the residuals
+with a sparse Jacobian, Levenberg-Marquardt and the per-frame covariance. :mod:`.joint` builds chains and
+decides what to fit; this module only fits one.
+
+A chain is a run of contacts ``0..K-1`` (floor/wall/net contacts on their surface, racket hits as free 3D
+points near their hitter) and the flights between them, optionally with a *lead-in* (the flight arriving at
+contact 0, integrated backwards from it over the frames before it) and a *run-out* (the flight leaving the
+last contact, up to the last frames of the track). Unknowns θ: each contact's sub-frame time τ and point,
+each flight's velocity and spin at its contact (the lead-in's: arriving), optionally a drag multiplier.
+
+Residuals (each divided by its σ):
+
+* reprojection of every observed frame from the flight that owns it (Huber weights, reweighted),
+* continuity: a flight ends at the next contact at its τ,
+* bounce: at a floor/glass contact the outgoing velocity and spin follow the rigid-ball impact model
+  (:func:`inference.physics.bounce`: the material's restitution and friction) from the incoming ones, so the
+  frames after a bounce constrain the flight before it,
+* the court: no frame below the floor or through a wall or glass (hinge on penetration), the net cleared
+  unless a net event says otherwise,
+* racket hits: a Student-t pull towards the hitter's court position (tighter along the court's length than
+  across), within the court's hit-height range, near the hand height when poses give it,
+* weak priors: τ near its event frame, spin towards 0, drag multiplier towards 1.
+
+Jacobian by forward differences of the flights' 11 inputs, all flights and perturbations integrated in one
+vectorised batch, assembled as a sparse matrix (each row touches at most a few dozen unknowns); the normal
+equations are small and solved densely.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+
+from inference.court import Court, Material, Plane
+from inference.physics import FlightModel, bounce, rk4_step
+
+from .observations import ContactPrior, Observations
+
+N_IN = 11  # flight inputs: C (3), v (3), ω (3), τ (1), drag scale (1)
+EPS = np.array([1e-4] * 3 + [1e-4] * 3 + [1e-2] * 3 + [1e-4] + [1e-3])
+#: materials whose rebound follows the impact model (net and mesh rebounds are irregular: left free)
+BOUNCE_MATERIALS = ("floor", "glass", "table")
+
+
+@dataclass(frozen=True)
+class HitPrior:
+    """The joint method's pull of a racket hit towards its hitter (court YAML ``hits.prior``).
+
+    Attributes:
+        forward: mean offset (m) of the hit point from the hitter's court position towards the net.
+        sigma_forward, sigma_lateral: spreads along the court's length and across it (m).
+        dof: Student-t degrees of freedom (small = heavy tails: a wrong hitter position costs little).
+        height, sigma_height: typical hit height and spread (m), used when no hand height is known.
+        hand_sigma: spread (m) of the hit height around the hand (wrist) height from a pose.
+        reach: hard limit (m) on the horizontal distance from the hitter.
+    """
+
+    forward: float = 0.2
+    sigma_forward: float = 0.35
+    sigma_lateral: float = 0.7
+    dof: float = 4.0
+    height: float = 1.1
+    sigma_height: float = 0.7
+    hand_sigma: float = 0.45
+    reach: float = 1.6
+
+    @classmethod
+    def from_court(cls, court: Court) -> HitPrior:
+        extra = {k: float(v) for k, v in (court.extra.get("hit_prior") or {}).items()}
+        unknown = sorted(set(extra) - {f for f in cls.__dataclass_fields__ if f != "reach"})
+        if unknown:
+            raise ValueError(f"{court.source}: unknown hit_prior keys {unknown}")
+        return cls(**extra, reach=court.hits.reach)
+
+
+@dataclass(frozen=True)
+class ShootingConfig:
+    """Weights and limits of one chain fit (σ's are the scale of each residual)."""
+
+    pixel_sigma: float = 2.0          # px, 2D measurement noise
+    huber_k: float = 3.0              # reprojection residuals beyond k σ are down-weighted
+    continuity_sigma: float = 0.005   # m
+    tau_sigma: float = 1.5            # frames, prior on the contact time around the event frame
+    tau_window: float = 2.5           # frames, the contact time stays within the event frame ± this
+    spin_sigma: float = 250.0         # rad/s, weak prior pulling spin to 0 (tennis topspin reaches ~300)
+    bounce_sigma_normal: float = 0.08  # relative σ of the normal rebound speed (restitution ± this)
+    bounce_sigma_tangent: float = 0.12  # relative σ of the tangential rebound velocity (of the impact speed)
+    bounce_sigma_floor: float = 0.3   # m/s added to both
+    bounce_spin_sigma: float = 150.0  # rad/s, outgoing spin around the impact model's
+    court_sigma: float = 0.01         # m, hinge on a frame below the floor or through a wall
+    net_sigma: float = 0.02           # m
+    limit_sigma: float = 0.05         # m, hinge of the hit-height range
+    fit_spin: bool = True
+    fit_drag: bool = False
+    drag_sigma: float = 0.2
+    max_iter: int = 60
+    irls_passes: int = 3
+    reweighted_iter: int = 6
+    tolerance: float = 1e-3            # stop when the cost falls by less than this fraction (bench_joint: 1e-4 is no better)
+    steps_per_second: float = 20.0    # RK4 steps per second at least (one per frame is < 1 µm off at 30 fps)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Layout
+# ---------------------------------------------------------------------------------------------------
+@dataclass
+class Contact:
+    """One contact of a chain.
+
+    Attributes:
+        frame: its event frame; label: the event label; kind: ``plane``, ``hit`` or ``free`` (a surface the
+            court does not have: a 3D point with no prior).
+        tau: index of τ in θ; coords: indices of the point's coordinates (2 on a plane, 3 for a hit).
+        origin, basis: point = origin + basis @ θ[coords]; normal: the plane's normal on the ball's side.
+        material: the surface's material when its rebound follows the impact model, else None.
+        prior: what was known before fitting.
+    """
+
+    frame: int
+    label: str
+    kind: str
+    tau: int
+    coords: list[int]
+    origin: np.ndarray
+    basis: np.ndarray
+    normal: np.ndarray | None
+    material: Material | None
+    prior: ContactPrior
+    plane: Plane | None = None
+
+
+@dataclass
+class Flight:
+    """One flight: from contact ``start`` (forwards to ``end``, or to ``last`` when ``end`` is None), or the
+    lead-in (``direction`` −1: backwards from contact ``start`` to frame ``last``).
+
+    ``vel``/``spin``/``drag``: θ indices of its velocity and spin at the contact, and its drag multiplier.
+    """
+
+    start: int
+    end: int | None
+    direction: int
+    last: int
+    vel: list[int]
+    spin: list[int] | None
+    drag: int | None
+
+    @property
+    def lead_in(self) -> bool:
+        return self.direction < 0
+
+
+@dataclass
+class Chain:
+    """Contacts and flights fitted together, in time order (the lead-in first when there is one)."""
+
+    contacts: list[Contact] = field(default_factory=list)
+    flights: list[Flight] = field(default_factory=list)
+    n: int = 0
+    first_frame: int = 0
+    last_frame: int = 0
+
+    def point(self, theta: np.ndarray, c: int) -> np.ndarray:
+        ct = self.contacts[c]
+        return ct.origin + ct.basis @ theta[ct.coords]
+
+    @property
+    def has_lead_in(self) -> bool:
+        return bool(self.flights) and self.flights[0].lead_in
+
+
+def plane_frame(plane: Plane, radius: float, camera_centre: np.ndarray) -> tuple:
+    """(origin, basis (3, 2), normal) of a plane moved one ball radius towards the ball's side."""
+    n = plane.normal
+    if plane.two_sided and (camera_centre - plane.origin) @ n < 0:
+        n = -n
+    return plane.origin + radius * n, np.stack([plane.u, plane.v], axis=1), n
+
+
+def build_chain(obs: Observations, priors: list[ContactPrior], first_frame: int, last_frame: int,
+                lead_in: bool, run_out: bool, cfg: ShootingConfig) -> tuple[Chain, np.ndarray]:
+    """Lay out θ for the contacts ``priors`` (in time order) and their flights; θ holds the priors' points
+    (NaN where unknown) and zero velocities and spins."""
+    chain = Chain(first_frame=first_frame, last_frame=last_frame)
+    theta: list[float] = []
+    court = obs.court
+    for prior in priors:
+        tau = len(theta)
+        theta.append(float(prior.frame))
+        if prior.kind == "plane" and prior.plane is not None:
+            origin, basis, normal = plane_frame(prior.plane, court.ball.radius, obs.camera.centre)
+            coords0 = basis.T @ (prior.point - origin)
+            mat = court.materials.get(prior.plane.material)
+            material = mat if prior.plane.material in BOUNCE_MATERIALS else None
+            kind = "plane"
+        else:  # a racket hit, or a contact with a surface the court does not have: a free 3D point
+            origin, basis, normal, coords0, material = np.zeros(3), np.eye(3), None, prior.point, None
+            kind = "hit" if prior.kind == "hit" else "free"
+        idx = list(range(len(theta), len(theta) + len(coords0)))
+        theta.extend(np.asarray(coords0, float).tolist())
+        chain.contacts.append(Contact(prior.frame, prior.label, kind, tau, idx, origin, basis, normal, material,
+                                      prior, prior.plane if kind == "plane" else None))
+
+    def flight(start: int, end: int | None, direction: int, last: int) -> None:
+        vel = list(range(len(theta), len(theta) + 3))
+        theta.extend([0.0] * 3)
+        spin = None
+        if cfg.fit_spin:
+            spin = list(range(len(theta), len(theta) + 3))
+            theta.extend([0.0] * 3)
+        drag = None
+        if cfg.fit_drag:
+            drag = len(theta)
+            theta.append(1.0)
+        chain.flights.append(Flight(start, end, direction, last, vel, spin, drag))
+
+    K = len(priors)
+    if lead_in:
+        flight(0, None, -1, first_frame)
+    for c in range(K - 1):
+        flight(c, c + 1, 1, priors[c + 1].frame)
+    if run_out:
+        flight(K - 1, None, 1, last_frame)
+    chain.n = len(theta)
+    return chain, np.array(theta)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Batched flights with finite-difference perturbations
+# ---------------------------------------------------------------------------------------------------
+@dataclass
+class Flights:
+    """Positions/velocities at integer frames ``F0[s] + direction[s] · j`` of each flight (base and perturbed).
+
+    P, V: (S, 1 + N_IN, L, 3); end, vend: (S, 1 + N_IN, 3) at the end contact's τ (forward flights with an
+    end contact; zeros otherwise).
+    """
+
+    F0: np.ndarray
+    direction: np.ndarray
+    P: np.ndarray
+    V: np.ndarray
+    end: np.ndarray
+    vend: np.ndarray
+
+
+def hermite(p0, v0, p1, v1, u, dt):
+    """Cubic Hermite position and velocity at fraction u of a step of dt seconds (broadcasting)."""
+    u2, u3 = u * u, u * u * u
+    pos = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * dt * v0 + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * dt * v1
+    vel = ((6 * u2 - 6 * u) * p0 / dt + (3 * u2 - 4 * u + 1) * v0 + (-6 * u2 + 6 * u) * p1 / dt
+           + (3 * u2 - 2 * u) * v1)
+    return pos, vel
+
+
+def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int, tau_end: np.ndarray,
+              fps: float, model: FlightModel, substeps: int, perturb: bool = True) -> Flights:
+    """Integrate S flights, each with its N_IN forward-difference perturbations, in one batch.
+
+    Args:
+        inputs: (S, N_IN) [C | v | ω | τ | drag scale] at τ_s (frames).
+        F0: (S,) the grid's first frame; direction: (S,) +1 forwards, −1 backwards; L: frames on the grid.
+        tau_end: (S,) τ of the end contact (NaN: none).
+        perturb: also the N_IN perturbations of each flight (else only the base).
+    """
+    S = len(inputs)
+    V_ = 1 + N_IN if perturb else 1
+    inp = np.repeat(inputs[:, None, :], V_, axis=1)                     # (S, V_, N_IN)
+    if perturb:
+        inp[:, 1:, :] += np.diag(EPS)[None]
+    inp = inp.reshape(-1, N_IN)
+    f0 = np.repeat(F0, V_).astype(float)
+    sgn = np.repeat(direction, V_).astype(float)
+    c = list(model.kernel())
+    c[1] = c[1] * inp[:, 10]                                            # per-flight drag
+    state = tuple(np.ascontiguousarray(inp[:, k]) for k in range(9))
+    state = rk4_step(state, (f0 - inp[:, 9]) / fps, c)                  # from τ to the grid's first frame
+    h = sgn / (fps * substeps)
+    P = np.empty((L, 3, len(inp)))
+    Vv = np.empty((L, 3, len(inp)))
+    for j in range(L):
+        P[j] = state[:3]
+        Vv[j] = state[3:6]
+        if j < L - 1:
+            for _ in range(substeps):
+                state = rk4_step(state, h, c)
+    P = P.transpose(2, 0, 1).reshape(S, V_, L, 3)
+    Vv = Vv.transpose(2, 0, 1).reshape(S, V_, L, 3)
+    end = np.zeros((S, V_, 3))
+    vend = np.zeros((S, V_, 3))
+    has = np.isfinite(tau_end)
+    if has.any():
+        rows = np.flatnonzero(has)
+        te = tau_end[rows]
+        ja = np.clip(np.floor(te).astype(int) - F0[rows], 0, L - 2)
+        u = (te - (F0[rows] + ja))[:, None, None]
+        end[rows], vend[rows] = hermite(P[rows, :, ja], Vv[rows, :, ja], P[rows, :, ja + 1], Vv[rows, :, ja + 1],
+                                        u, 1.0 / fps)
+    return Flights(F0, direction, P, Vv, end, vend)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Residuals with a sparse Jacobian
+# ---------------------------------------------------------------------------------------------------
+class _Rows:
+    """Accumulates residual blocks and their sparse Jacobian entries."""
+
+    def __init__(self, n: int, jac: bool):
+        self.n, self.jac = n, jac
+        self.r: list[np.ndarray] = []
+        self.I: list[np.ndarray] = []
+        self.Jc: list[np.ndarray] = []
+        self.Jv: list[np.ndarray] = []
+        self.m = 0
+
+    def add(self, r: np.ndarray, blocks=None) -> None:
+        """r: (R,) residuals; blocks(): [(cols (R, k) or (k,), values (R, k))] (called only with a Jacobian)."""
+        r = np.asarray(r, float).reshape(-1)
+        R = len(r)
+        if not R:
+            return
+        if self.jac and blocks is not None:
+            rows = np.arange(self.m, self.m + R)
+            for cols, vals in blocks():
+                vals = np.asarray(vals, float).reshape(R, -1)
+                cols = np.broadcast_to(np.asarray(cols), vals.shape)
+                self.I.append(np.repeat(rows, vals.shape[1]))
+                self.Jc.append(cols.reshape(-1))
+                self.Jv.append(vals.reshape(-1))
+        self.r.append(r)
+        self.m += R
+
+    def result(self) -> tuple[np.ndarray, sparse.csr_matrix | None]:
+        r = np.concatenate(self.r) if self.r else np.zeros(0)
+        if not self.jac:
+            return r, None
+        if not self.I:
+            return r, sparse.csr_matrix((len(r), self.n))
+        J = sparse.csr_matrix((np.concatenate(self.Jv), (np.concatenate(self.I), np.concatenate(self.Jc))),
+                              shape=(len(r), self.n))
+        return r, J
+
+
+def student_t(u: np.ndarray, dof: float) -> tuple[np.ndarray, np.ndarray]:
+    """Residual ρ(u) = sign(u) √(ν log(1 + u²/ν)) whose square is the Student-t negative log-likelihood, and
+    dρ/du (→ 1 at u = 0)."""
+    q = np.log1p(u * u / dof) * dof
+    rho = np.sign(u) * np.sqrt(q)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.where(np.abs(u) > 1e-8, u / (rho * (1.0 + u * u / dof)), 1.0)
+    return rho, d
+
+
+class Problem:
+    """Residuals and Jacobian of one chain."""
+
+    def __init__(self, obs: Observations, chain: Chain, cfg: ShootingConfig, model: FlightModel,
+                 hit_prior: HitPrior):
+        self.obs, self.chain, self.cfg, self.model, self.hit_prior = obs, chain, cfg, model, hit_prior
+        self.fps = obs.fps
+        self.substeps = max(1, int(np.ceil(cfg.steps_per_second / obs.fps)))
+        frames = np.arange(chain.first_frame, chain.last_frame + 1)
+        seen = np.isfinite(obs.uv[frames]).all(axis=1)
+        self.frames = frames[seen]
+        self.uv = obs.uv[self.frames]
+        self.weights = np.ones(len(self.frames))
+        self.event_frames = np.array([ct.frame for ct in chain.contacts])
+        nets = [p for p in obs.court.planes if p.event == "net"]
+        self.net = nets[0] if nets else None
+        self._walls = [p for p in obs.court.planes if not p.two_sided and p.event != "ground"
+                       and p.material in ("glass", "mesh")]
+        r_ball = obs.court.ball.radius
+        self._wall_frames = [(w, w.normal, w.origin + r_ball * w.normal) for w in self._walls]
+        self._layout_inputs()
+        self.last_norm = np.zeros(len(self.frames))
+        #: the impact model and the court's walls take part (off in the first pass: their hinges and the
+        #: impact of a flight that is still far off send LM into poor minima)
+        self.physics = True
+
+    # --- which θ entries feed each flight's inputs ------------------------------------------------
+    def _layout_inputs(self) -> None:
+        """Per flight: the θ columns (S, 11) and d(inputs)/d(those columns) (S, N_IN, 11)."""
+        ch = self.chain
+        S = len(ch.flights)
+        cols = np.zeros((S, 11), np.int64)
+        M = np.zeros((S, N_IN, 11))
+        for s, fl in enumerate(ch.flights):
+            ct = ch.contacts[fl.start]
+            entries: list[tuple[int, int, float]] = []
+            for k in range(3):
+                for q, idx in enumerate(ct.coords):
+                    entries.append((k, idx, ct.basis[k, q]))
+            entries += [(3 + k, fl.vel[k], 1.0) for k in range(3)]
+            if fl.spin is not None:
+                entries += [(6 + k, fl.spin[k], 1.0) for k in range(3)]
+            entries.append((9, ct.tau, 1.0))
+            if fl.drag is not None:
+                entries.append((10, fl.drag, 1.0))
+            uniq = sorted({e[1] for e in entries})
+            pos = {c: i for i, c in enumerate(uniq)}
+            cols[s, :len(uniq)] = uniq
+            for k, idx, coef in entries:
+                M[s, k, pos[idx]] += coef
+        self.cols, self.M = cols, M
+        # the constant part of the inputs: the start contact's plane origin, drag scale 1 when not fitted
+        offset = np.zeros((S, N_IN))
+        for s, fl in enumerate(ch.flights):
+            offset[s, :3] = ch.contacts[fl.start].origin
+            if fl.drag is None:
+                offset[s, 10] = 1.0
+        self.offset = offset
+
+    def inputs(self, theta: np.ndarray) -> np.ndarray:
+        """(S, N_IN) flight inputs at θ."""
+        return np.einsum("skm,sm->sk", self.M, theta[self.cols]) + self.offset
+
+    def taus(self, theta: np.ndarray) -> np.ndarray:
+        return theta[[ct.tau for ct in self.chain.contacts]]
+
+    def owners(self, frames: np.ndarray, taus: np.ndarray) -> np.ndarray:
+        """(M,) the flight that owns each frame (by the contact times)."""
+        k = np.searchsorted(taus, frames, side="right")               # contacts at or before the frame
+        if not self.chain.has_lead_in:
+            k = k - 1
+        return np.clip(k, 0, len(self.chain.flights) - 1)
+
+    def grid(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """First grid frame (S,), direction (S,), τ of the end contact (S, NaN none), grid length."""
+        ch = self.chain
+        taus = self.taus(theta)
+        S = len(ch.flights)
+        F0 = np.zeros(S, np.int64)
+        dirn = np.array([fl.direction for fl in ch.flights], np.int64)
+        tau_end = np.full(S, np.nan)
+        need = np.zeros(S, np.int64)
+        for s, fl in enumerate(ch.flights):
+            t0, ev0 = taus[fl.start], ch.contacts[fl.start].frame
+            if fl.lead_in:
+                F0[s] = max(int(np.ceil(t0)), ev0)
+                need[s] = F0[s] - fl.last + 1
+            else:
+                F0[s] = min(int(np.floor(t0)), ev0)
+                if fl.end is not None:
+                    te = taus[fl.end]
+                    tau_end[s] = te
+                    need[s] = max(int(np.ceil(te)), ch.contacts[fl.end].frame) + 1 - F0[s] + 1
+                else:
+                    need[s] = fl.last - F0[s] + 1
+        return F0, dirn, tau_end, int(max(need.max(), 2))
+
+    def flights(self, theta: np.ndarray, perturb: bool) -> Flights:
+        F0, dirn, tau_end, L = self.grid(theta)
+        return integrate(self.inputs(theta), F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb)
+
+    def index(self, fl: Flights, s: np.ndarray, frames: np.ndarray) -> np.ndarray:
+        """Grid index of ``frames`` in flights ``s``."""
+        return np.clip((frames - fl.F0[s]) * fl.direction[s], 0, fl.P.shape[2] - 1)
+
+    # --- residuals -------------------------------------------------------------------------------
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
+    def evaluate(self, theta: np.ndarray, jac: bool = True) -> tuple[np.ndarray, sparse.csr_matrix | None, dict]:
+        """Residuals (m,), the sparse Jacobian (m, n) with ``jac``, and what the outputs need."""
+        ch, cfg = self.chain, self.cfg
+        fl = self.flights(theta, perturb=jac)
+        taus = self.taus(theta)
+        rows = _Rows(ch.n, jac)
+        cols, M = self.cols, self.M
+
+        def through(s: np.ndarray, d_in: np.ndarray) -> list:
+            """d(rows)/d(inputs of flight s) (R, N_IN) → sparse blocks over θ."""
+            return [(cols[s], np.einsum("rk,rkm->rm", d_in, M[s]))]
+
+        # reprojection
+        own = self.owners(self.frames, taus)
+        j = self.index(fl, own, self.frames)
+        pts = fl.P[own, :, j]                                               # (R, V, 3)
+        pix = self.obs.camera.project(pts.reshape(-1, 3)).reshape(len(j), pts.shape[1], 2)
+        r = (pix[:, 0] - self.uv) / cfg.pixel_sigma
+        r = np.where(np.isfinite(r), r, 1e3)                                # behind the camera: far off
+        self.last_norm = np.linalg.norm(r, axis=1)
+        w = self.weights
+
+        def reproj_blocks():
+            d = (pix[:, 1:] - pix[:, :1]) / EPS[None, :, None] / cfg.pixel_sigma   # (R, N_IN, 2)
+            d = np.where(np.isfinite(d), d, 0.0) * w[:, None, None]
+            d = d.transpose(0, 2, 1).reshape(-1, N_IN)
+            return through(np.repeat(own, 2), d)
+
+        rows.add((r * w[:, None]).reshape(-1), reproj_blocks)
+
+        # continuity: a flight ends at its end contact
+        for s, f in enumerate(ch.flights):
+            if f.end is None:
+                continue
+            ct = ch.contacts[f.end]
+
+            def cont_blocks(s=s, ct=ct):
+                d_end = (fl.end[s, 1:] - fl.end[s, :1]) / EPS[:, None]           # (N_IN, 3)
+                b = through(np.full(3, s), d_end.T)
+                b.append((np.array([ct.tau]), (fl.vend[s, 0] / self.fps)[:, None]))
+                b.append((np.array(ct.coords), -ct.basis))
+                return [(c, v / cfg.continuity_sigma) for c, v in b]
+
+            rows.add((fl.end[s, 0] - ch.point(theta, f.end)) / cfg.continuity_sigma, cont_blocks)
+
+        if self.physics:
+            self._bounces(theta, fl, taus, rows, through)
+            self._court(fl, taus, rows, through)
+        self._net(fl, taus, rows, through)
+        self._hits(theta, rows)
+
+        # contact-time prior, spin and drag priors
+        tau_idx = np.array([ct.tau for ct in ch.contacts])
+        ev = self.event_frames
+        rows.add((theta[tau_idx] - ev) / cfg.tau_sigma,
+                 lambda: [(tau_idx[:, None], np.full((len(ev), 1), 1.0 / cfg.tau_sigma))])
+        spin = np.array([f.spin for f in ch.flights if f.spin is not None], np.int64).reshape(-1)
+        if len(spin):
+            rows.add(theta[spin] / cfg.spin_sigma,
+                     lambda: [(spin[:, None], np.full((len(spin), 1), 1.0 / cfg.spin_sigma))])
+        drag = np.array([f.drag for f in ch.flights if f.drag is not None], np.int64)
+        if len(drag):
+            rows.add((theta[drag] - 1.0) / cfg.drag_sigma,
+                     lambda: [(drag[:, None], np.full((len(drag), 1), 1.0 / cfg.drag_sigma))])
+        r_all, J = rows.result()
+        return r_all, J, {"flights": fl, "owners": own, "taus": taus}
+
+    def _incoming(self, theta: np.ndarray, fl: Flights, taus: np.ndarray, c: int):
+        """The flight arriving at contact c: (flight index, v_in (3,), ω_in (3,), dv_in/dinputs (N_IN, 3) or
+        None when v_in is the lead-in's own velocity parameter)."""
+        ch = self.chain
+        for s, f in enumerate(ch.flights):
+            if f.end == c:
+                w = theta[f.spin] if f.spin is not None else np.zeros(3)
+                decay = np.exp(-self.model.spin_rate * (taus[c] - taus[f.start]) / self.fps)
+                dv = (fl.vend[s, 1:] - fl.vend[s, :1]) / EPS[:, None] if fl.vend.shape[1] > 1 else np.zeros((N_IN, 3))
+                return s, fl.vend[s, 0], w * decay, dv, decay
+            if f.lead_in and f.start == c:
+                w = theta[f.spin] if f.spin is not None else np.zeros(3)
+                return s, theta[f.vel], w, None, 1.0
+        return None
+
+    def _bounces(self, theta, fl, taus, rows: _Rows, through) -> None:
+        """The impact model at floor/glass contacts with flights on both sides."""
+        ch, cfg = self.chain, self.cfg
+        r_ball = self.obs.court.ball.radius
+        for c, ct in enumerate(ch.contacts):
+            if ct.material is None or ct.normal is None:
+                continue
+            out = [s for s, f in enumerate(ch.flights) if f.start == c and not f.lead_in]
+            inc = self._incoming(theta, fl, taus, c)
+            if not out or inc is None:
+                continue
+            so, (si, vin, win, dvin, decay) = out[0], inc
+            n = ct.normal
+            if vin @ n > -0.3:      # not moving into the surface: nothing to model
+                continue
+            mat = ct.material
+            x0 = np.concatenate([vin, win])
+            X = np.repeat(x0[None], 7, axis=0)
+            X[1:4, :3] += np.eye(3) * 1e-4
+            X[4:7, 3:] += np.eye(3) * 1e-2
+            vo, wo = bounce(X[:, :3], X[:, 3:], n, mat.restitution, mat.friction, r_ball)
+            speed = float(np.linalg.norm(vin))
+            vn = abs(float(vin @ n))
+            s_n = cfg.bounce_sigma_normal * vn + cfg.bounce_sigma_floor
+            s_t = cfg.bounce_sigma_tangent * speed + cfg.bounce_sigma_floor
+            # residual in (normal, tangential) components
+            Pn = np.outer(n, n)
+            scale = (Pn / s_n + (np.eye(3) - Pn) / s_t)                         # (3, 3) symmetric
+            fo = ch.flights[so]
+            v_out = theta[fo.vel]
+            rv = scale @ (v_out - vo[0])
+            dvo = np.concatenate([(vo[1:4] - vo[0]) / 1e-4, (vo[4:7] - vo[0]) / 1e-2], axis=0)  # (6, 3)
+            has_w = fo.spin is not None
+            fi = ch.flights[si]
+
+            def blocks(fo=fo, fi=fi, si=si, dvin=dvin, dvo=dvo, scale=scale, decay=decay):
+                b = [(np.array(fo.vel), scale)]
+                d_vin = -(scale @ dvo[:3].T)                                    # (3, 3) d r / d v_in
+                d_win = -(scale @ dvo[3:].T) * decay
+                if dvin is None:
+                    b.append((np.array(fi.vel), d_vin))
+                else:
+                    b += through(np.full(3, si), d_vin @ dvin.T)
+                if fi.spin is not None:
+                    b.append((np.array(fi.spin), d_win))
+                return b
+
+            rows.add(rv, blocks)
+            if has_w and fi.spin is not None:
+                dwo = np.concatenate([(wo[1:4] - wo[0]) / 1e-4, (wo[4:7] - wo[0]) / 1e-2], axis=0)  # (6, 3)
+                rw = (theta[fo.spin] - wo[0]) / cfg.bounce_spin_sigma
+
+                def wblocks(fo=fo, fi=fi, si=si, dvin=dvin, dwo=dwo, decay=decay):
+                    k = 1.0 / cfg.bounce_spin_sigma
+                    b = [(np.array(fo.spin), np.eye(3) * k)]
+                    d_vin = -dwo[:3].T * k
+                    if dvin is None:
+                        b.append((np.array(fi.vel), d_vin))
+                    else:
+                        b += through(np.full(3, si), d_vin @ dvin.T)
+                    b.append((np.array(fi.spin), -dwo[3:].T * k * decay))
+                    return b
+
+                rows.add(rw, wblocks)
+
+    def frame_positions(self, fl: Flights, taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every frame of the chain: frames (M,), owning flights (M,), grid indices (M,)."""
+        frames = np.arange(self.chain.first_frame, self.chain.last_frame + 1)
+        own = self.owners(frames, taus)
+        return frames, own, self.index(fl, own, frames)
+
+    def _court(self, fl: Flights, taus: np.ndarray, rows: _Rows, through) -> None:
+        """Hinges on frames below the floor or behind a wall/glass patch (penetration deeper than 1 cm)."""
+        cfg = self.cfg
+        frames, own, j = self.frame_positions(fl, taus)
+        P = fl.P[own, 0, j]                                                    # (M, 3)
+        r_ball = self.obs.court.ball.radius
+        tol = 0.01
+        # frames outside every flight's time span (before the first contact without a lead-in, after the last
+        # without a run-out) are extrapolations: not judged
+        live = np.ones(len(P), bool)
+        if not self.chain.has_lead_in:
+            live &= frames >= taus[0]
+        if self.chain.flights[-1].end is not None:
+            live &= frames <= taus[-1]
+        for wall, n, o in [(None, np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, r_ball]))] + self._wall_frames:
+            d = (P - o) @ n
+            bad = np.flatnonzero(live & (d < -tol))
+            if len(bad) and wall is not None:           # behind the wall's plane: within its extent?
+                bad = bad[wall.contains(P[bad], tol=0.05)]
+            if not len(bad):
+                continue
+
+            def blocks(bad=bad, n=n):
+                dP = (fl.P[own[bad], 1:, j[bad]] - fl.P[own[bad], :1, j[bad]]) / EPS[None, :, None]  # (R, N_IN, 3)
+                return through(own[bad], (dP @ n) / cfg.court_sigma)
+
+            rows.add((d[bad] + tol) / cfg.court_sigma, blocks)
+
+    def _net(self, fl: Flights, taus: np.ndarray, rows: _Rows, through) -> None:
+        """Hinge on the ball's height where a flight without a net event crosses the net plane."""
+        if self.net is None:
+            return
+        net = self.net
+        ch = self.chain
+        need_r = self.obs.court.ball.radius
+        for s, f in enumerate(ch.flights):
+            labels = [ch.contacts[f.start].label] + ([ch.contacts[f.end].label] if f.end is not None else [])
+            if "net" in labels:
+                continue
+            P = fl.P[s, 0]
+            d = (P - net.origin) @ net.normal
+            if f.lead_in:
+                j1 = int(fl.F0[s] - f.last)
+            elif f.end is not None:
+                j1 = int(np.floor(taus[f.end])) - fl.F0[s]
+            else:
+                j1 = f.last - fl.F0[s]
+            j1 = min(j1, len(P) - 1)
+            if j1 < 1:
+                continue
+            cross = np.flatnonzero(np.sign(d[:j1]) * np.sign(d[1:j1 + 1]) < 0)
+            if not len(cross):
+                continue
+            k = int(cross[0])
+            fr = d[k] / (d[k] - d[k + 1])
+            p = P[k] + fr * (P[k + 1] - P[k])
+            need = net_height(net, p) + need_r
+            if p[2] >= need:
+                continue
+
+            def blocks(s=s, k=k, fr=fr):
+                dz = ((1 - fr) * (fl.P[s, 1:, k, 2] - P[k, 2]) + fr * (fl.P[s, 1:, k + 1, 2] - fl.P[s, 0, k + 1, 2])) / EPS
+                return through(np.array([s]), -dz[None, :] / self.cfg.net_sigma)
+
+            rows.add(np.array([(need - p[2]) / self.cfg.net_sigma]), blocks)
+
+    def _hits(self, theta: np.ndarray, rows: _Rows) -> None:
+        """Racket hits: Student-t pull towards the hitter (forward, lateral), height range and height prior."""
+        hp, cfg = self.hit_prior, self.cfg
+        lo, hi = self.obs.court.hits.height
+        lo = max(lo, self.obs.court.ball.radius)  # the ball's centre stays above the floor
+        for ct in self.chain.contacts:
+            if ct.kind != "hit":
+                continue
+            idx = np.array(ct.coords)
+            p = theta[idx]
+            h = ct.prior.hitter_xy
+            if h is not None:
+                fwd = 1.0 if h[1] < self.obs.court.net_y else -1.0
+                u = np.array([(p[0] - h[0]) / hp.sigma_lateral, ((p[1] - h[1]) * fwd - hp.forward) / hp.sigma_forward])
+                rho, d = student_t(u, hp.dof)
+                rows.add(rho, lambda d=d, fwd=fwd, idx=idx: [
+                    (idx[:2][None, :].repeat(2, 0), np.diag([d[0] / hp.sigma_lateral, d[1] * fwd / hp.sigma_forward]))])
+            z0, sz = (ct.prior.hand_z, hp.hand_sigma) if ct.prior.hand_z is not None else (hp.height, hp.sigma_height)
+            rho, d = student_t(np.array([(p[2] - z0) / sz]), hp.dof)
+            rows.add(rho, lambda d=d, idx=idx, sz=sz: [(idx[2:3][None, :], np.array([[d[0] / sz]]))])
+            viol = p[2] - hi if p[2] > hi else (p[2] - lo if p[2] < lo else 0.0)
+            if viol:
+                rows.add(np.array([viol / cfg.limit_sigma]),
+                         lambda idx=idx: [(idx[2:3][None, :], np.array([[1.0 / cfg.limit_sigma]]))])
+
+    def reweight(self) -> None:
+        """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
+        k = self.cfg.huber_k
+        self.weights = np.where(self.last_norm > k, np.sqrt(k / np.maximum(self.last_norm, 1e-12)), 1.0)
+
+    def clamp(self, theta: np.ndarray) -> np.ndarray:
+        """Project θ onto what is possible: contact times in their windows and in order, racket hits within
+        the court's height range and the hitter's reach."""
+        cfg, ch = self.cfg, self.chain
+        theta = theta.copy()
+        prev = -np.inf
+        for ct in ch.contacts:
+            t = np.clip(theta[ct.tau], ct.frame - cfg.tau_window, ct.frame + cfg.tau_window)
+            t = max(t, prev + 0.5)
+            theta[ct.tau] = t
+            prev = t
+        lo, hi = self.obs.court.hits.height
+        r_ball = self.obs.court.ball.radius
+        for ct in ch.contacts:
+            if ct.kind != "hit":
+                continue
+            p = theta[ct.coords]
+            p[2] = np.clip(p[2], max(lo, r_ball), hi)
+            h = ct.prior.hitter_xy
+            if h is not None:
+                off = p[:2] - h
+                dist = float(np.linalg.norm(off))
+                if dist > self.hit_prior.reach:
+                    p[:2] = h + off * (self.hit_prior.reach / dist)
+            theta[ct.coords] = p
+        return theta
+
+
+def net_height(net, point: np.ndarray) -> float:
+    """Height of the net's top edge at ``point``'s position along the net (from the net polygon)."""
+    poly = net.polygon
+    top = poly[poly[:, 1] > 1e-6]
+    order = np.argsort(top[:, 0])
+    u = (point - net.origin) @ net.u
+    return float(np.interp(u, top[order, 0], top[order, 1]))
+
+
+# ---------------------------------------------------------------------------------------------------
+# Levenberg-Marquardt
+# ---------------------------------------------------------------------------------------------------
+#: Levenberg-Marquardt damping: start nearly Gauss-Newton and change it tenfold.
+LM_LAMBDA0 = 1e-4
+LM_FACTOR = 10.0
+
+
+@dataclass
+class Solution:
+    theta: np.ndarray
+    r: np.ndarray
+    J: sparse.csr_matrix
+    aux: dict
+    iterations: int
+
+
+def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> Solution:
+    """Iteratively reweighted LM: a pass with unit weights, then short passes with Huber weights while some
+    2D points lie beyond ``huber_k`` σ (outliers are down-weighted, not dropped)."""
+    cfg = problem.cfg
+    problem.physics = False
+    sol = lm(problem, problem.clamp(theta), max_iter or cfg.max_iter)
+    problem.physics = True
+    n = sol.iterations
+    sol = lm(problem, sol.theta, max_iter or cfg.max_iter)
+    sol.iterations += n
+    for _ in range(cfg.irls_passes - 1):
+        problem.reweight()
+        if np.all(problem.weights == 1.0):
+            break
+        n = sol.iterations
+        sol = lm(problem, sol.theta, cfg.reweighted_iter)
+        sol.iterations += n
+    return sol
+
+
+def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
+    cfg = problem.cfg
+    r, J, aux = problem.evaluate(theta)
+    cost = float(r @ r)
+    lam = LM_LAMBDA0
+    it = 0
+    rel = 1.0
+    for it in range(max_iter):  # noqa: B007
+        A = (J.T @ J).toarray()
+        g = J.T @ r
+        D = np.maximum(np.diag(A), 1e-9)
+        improved = False
+        for _ in range(8):
+            try:
+                step = -np.linalg.solve(A + lam * np.diag(D), g)
+            except np.linalg.LinAlgError:
+                lam *= LM_FACTOR
+                continue
+            cand = problem.clamp(theta + step)
+            r2, _, _ = problem.evaluate(cand, jac=False)
+            cost2 = float(r2 @ r2)
+            if np.isfinite(cost2) and cost2 < cost:
+                rel = (cost - cost2) / max(cost, 1e-12)
+                theta, cost = cand, cost2
+                r, J, aux = problem.evaluate(theta)
+                lam = max(lam / LM_FACTOR, 1e-9)
+                improved = True
+                break
+            lam *= LM_FACTOR
+        if not improved or rel < cfg.tolerance:
+            break
+    return Solution(theta, r, J, aux, it + 1)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Covariance
+# ---------------------------------------------------------------------------------------------------
+def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0,
+                      floor_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every frame of the chain: frames (M,), positions (M, 3), owning flights (M,) and 3×3 covariances
+    (M, 3, 3) from the Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it
+    exceeds 1, times ``inflation``², plus ``floor_m``² I for what the model leaves out)."""
+    fl, taus = sol.aux["flights"], sol.aux["taus"]
+    frames, own, j = problem.frame_positions(fl, taus)
+    xyz = fl.P[own, 0, j]
+    n_obs = 2 * len(problem.frames)
+    wr = sol.r[:n_obs]
+    dof = max(n_obs - problem.chain.n, 1)
+    s2 = max(float(wr @ wr) / dof, 1.0) * inflation**2
+    A = (sol.J.T @ sol.J).toarray()
+    try:
+        cov = np.linalg.pinv(A, hermitian=True) * s2
+    except np.linalg.LinAlgError:
+        return frames, xyz, own, np.full((len(frames), 3, 3), np.nan)
+    dP = (fl.P[own, 1:, j] - fl.P[own, :1, j]) / EPS[None, :, None]             # (M, N_IN, 3)
+    Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
+    C = problem.cols[own]                                                        # (M, 11)
+    sub = cov[C[:, :, None], C[:, None, :]]                                      # (M, 11, 11)
+    out = np.einsum("mdc,mce,mfe->mdf", Jp, sub, Jp) + floor_m**2 * np.eye(3)[None]
+    return frames, xyz, own, out
