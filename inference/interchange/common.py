@@ -184,14 +184,19 @@ def labelled_runs(track: BallTrack) -> list[np.ndarray]:
     return np.split(np.arange(len(track)), cuts)
 
 
-def to_unit(path: Path, where: str, x: float, y: float, width: float, height: float) -> tuple[float, float]:
-    """Pixel ``(x, y)`` of a ``width x height`` image -> normalised; a centre off the image is an error."""
+def to_unit(path: Path, where: str, x: float, y: float, width: float, height: float,
+            line: int | None = None) -> tuple[float, float]:
+    """Pixel ``(x, y)`` of a ``width x height`` image -> normalised; a centre off the image is an error.
+
+    The error names ``line`` when given (XML), else starts with ``where``.
+    """
     tol = EDGE_TOLERANCE_PX
+    prefix = "" if line is not None else f"{where}: "
     if not (np.isfinite(x) and np.isfinite(y)):
-        raise FormatError(path, f"{where}: coordinate is not a finite number", fix="write numbers")
+        raise FormatError(path, f"{prefix}coordinate is not a finite number", line=line, fix="write numbers")
     if x < -tol or y < -tol or x > width + tol or y > height + tol:
-        raise FormatError(path, f"{where}: ball centre ({x:g}, {y:g}) lies outside the {width:g}x{height:g} image",
-                          fix="check the frame size of the task, or mark the ball outside/hidden on this frame")
+        raise FormatError(path, f"{prefix}ball centre ({x:g}, {y:g}) lies outside the {width:g}x{height:g} image",
+                          line=line, fix="check the frame size of the task, or mark the ball outside on this frame")
     return min(max(x / width, 0.0), 1.0), min(max(y / height, 0.0), 1.0)
 
 

@@ -224,7 +224,7 @@ def _ball_key(path: Path, shape: XmlNode, clip_frame: _Frames, width: float, hei
                                   'outside="1"')
             visibility = int(text)
     x, y = _centre(path, shape)
-    return Key(frame, to_unit(path, where, x, y, width, height), visibility, True, where)
+    return Key(frame, to_unit(path, where, x, y, width, height, line=shape.line), visibility, True, where)
 
 
 # ---------------------------------------------------------------------------------------------- export
