@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import textwrap
 import time
 from pathlib import Path
 
@@ -13,6 +14,10 @@ SUFFIXES = {".xml": "cvat", ".json": "labelstudio"}
 _MAPPING = ("The ball is the label 'ball'; events use the labels of events.csv (ground, wall_near, wall_far, "
             "wall_left, wall_right, mesh, net, player_near, player_far). Map other names with --label-map. "
             "The full mapping is in docs/interchange.md.")
+
+
+def _wrap(text: str) -> str:
+    return textwrap.fill(text, width=100)
 
 
 def _format(explicit: str | None, path: Path) -> str:
@@ -29,8 +34,9 @@ def register_import(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "import",
         help="import a ball track and events from CVAT (video XML) or Label Studio (JSON) into a clip folder",
-        description="Reads a 'CVAT for video 1.1' annotations.xml or a Label Studio JSON export and writes the "
-        "clip folder's ball.csv and events.csv (and clip.yaml when the folder is new). " + _MAPPING,
+        description=_wrap("Reads a 'CVAT for video 1.1' annotations.xml or a Label Studio JSON export and writes "
+                          "the clip folder's ball.csv and events.csv (and clip.yaml when the folder is new). "
+                          + _MAPPING),
         epilog="examples:\n"
         "  rally3d import annotations.xml clips/rally_01                  # into an existing clip\n"
         "  rally3d import export.json clips/rally_02 --task 17 --sport padel --width 1920 --height 1080\n"
@@ -42,8 +48,8 @@ def register_import(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--format", choices=FORMATS, help="default: from the suffix (.xml cvat, .json labelstudio)")
     p.add_argument("--label-map", action="append", default=[], metavar="NAME=TARGET",
                    help="map a label of the file to 'ball', an event label or 'ignore' (repeatable)")
-    p.add_argument("--task", type=int, help="Label Studio: the task id when the export holds several")
-    p.add_argument("--annotation", type=int, help="Label Studio: the annotation id (default: the first one)")
+    p.add_argument("--task", type=int, metavar="ID", help="Label Studio: the task id when the export holds several")
+    p.add_argument("--annotation", type=int, metavar="ID", help="Label Studio: the annotation id (default: the first one)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace existing ball.csv/events.csv (a backup goes to .rally3d/backup/)")
     p.add_argument("--dry-run", action="store_true", help="read and check the file, print a summary, write nothing")
@@ -75,7 +81,8 @@ def run_import(args: argparse.Namespace) -> int:
         print(f"warning: {line}")
     visible = int((imported.ball.visibility > 0).sum())
     print(f"{imported.source}: {len(imported.ball)} ball rows ({visible} visible), {len(imported.events)} events"
-          + (f", {imported.n_frames} frames" if imported.n_frames else ""))
+          + (f", {imported.n_frames} frames" if imported.n_frames else "")
+          + (f", {imported.fps:g} fps (framesCount / duration)" if imported.fps else ""))
     if args.dry_run:
         print("dry run: nothing written")
         return 0
@@ -91,9 +98,9 @@ def register_export(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "export",
         help="export a clip folder's ball track and events to CVAT (video XML) or Label Studio (JSON)",
-        description="Writes the clip's ball.csv and events.csv as a 'CVAT for video 1.1' annotations.xml (upload "
-        "it to a task made from the clip's video) or as a Label Studio JSON task (import it into a project "
-        "whose labeling config is in docs/interchange.md). " + _MAPPING,
+        description=_wrap("Writes the clip's ball.csv and events.csv as a 'CVAT for video 1.1' annotations.xml "
+                          "(upload it to a task made from the clip's video) or as a Label Studio JSON task (import "
+                          "it into a project whose labeling config is in docs/interchange.md). " + _MAPPING),
         epilog="examples:\n"
         "  rally3d export clips/rally_01 --out rally_01.xml                 # CVAT\n"
         "  rally3d export clips/rally_01 --out rally_01.json --video-url /data/local-files/?d=rally_01.mp4",

@@ -28,6 +28,8 @@ BOX_PX = 12.0
 """Side of the square box written around the ball on export (pixels); shrunk at the image edge."""
 
 TIMELINE_TYPES = ("timelinelabels",)
+BOX_NAME, TIMELINE_NAME = "box", "events"
+"""Control names of the labeling config in docs/interchange.md (the export's ``from_name``)."""
 
 
 def _fail(path: Path, where: str, problem: str, fix: str) -> FormatError:
@@ -306,18 +308,18 @@ def export_labelstudio(
             sequence.append({"frame": int(track.frame[i]) + 1, "enabled": enabled, "rotation": 0,
                              "x": 100 * (u - hw), "y": 100 * (v - hh), "width": 200 * hw, "height": 200 * hh,
                              "time": round(int(track.frame[i]) / fps, 6)})
-        result.append({"id": f"ball{r}", "type": "videorectangle", "from_name": "box", "to_name": "video",
+        result.append({"id": f"ball{r}", "type": "videorectangle", "from_name": BOX_NAME, "to_name": "video",
                        "origin": "manual", "value": {"framesCount": n_frames, "duration": n_frames / fps,
                                                      "labels": [BALL], "sequence": sequence}})
     for name, code in VISIBILITY_LABELS.items():
         spans = _spans(track.frame[track.visibility == code])
         if spans:
-            result.append({"id": f"vis_{name}", "type": "timelinelabels", "from_name": "visibility",
+            result.append({"id": f"vis_{name}", "type": "timelinelabels", "from_name": TIMELINE_NAME,
                            "to_name": "video", "origin": "manual",
                            "value": {"ranges": [{"start": a + 1, "end": b + 1} for a, b in spans],
                                      "timelinelabels": [name]}})
     for k, (frame, label) in enumerate(zip(events.frame.tolist(), events.event.tolist())):
-        result.append({"id": f"event{k}", "type": "timelinelabels", "from_name": "events", "to_name": "video",
+        result.append({"id": f"event{k}", "type": "timelinelabels", "from_name": TIMELINE_NAME, "to_name": "video",
                        "origin": "manual", "value": {"ranges": [{"start": frame + 1, "end": frame + 1}],
                                                      "timelinelabels": [label]}})
     task = {"id": task_id, "data": {"video": video_url},
