@@ -373,6 +373,9 @@ def write_into_clip(
                                   f"imported file is {imported.width}x{imported.height} (another aspect ratio)",
                                   fix="import into the clip made from the same video")
         n_frames = info.n_frames
+        if n_frames and imported.n_frames and imported.n_frames != n_frames:
+            report.append(f"warning: the file states {imported.n_frames} frames, the clip has {n_frames}: "
+                          "check that it was made from this clip's video")
     else:
         missing = [flag for flag, ok in (("--sport", sport), ("--fps", fps or imported.fps),
                                          ("--width/--height", imported.width and imported.height)) if not ok]

@@ -51,6 +51,10 @@ def _tasks(path: Path, data: Any) -> list[dict]:
     if not isinstance(data, list) or not all(isinstance(t, dict) for t in data):
         raise FormatError(path, "the JSON is not a list of tasks",
                           fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)")
+    for i, task in enumerate(data):
+        if not {"annotations", "predictions", "data"} & set(task):
+            raise FormatError(path, f"item {i} is not a Label Studio task (no 'data', 'annotations' or "
+                              "'predictions')", fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)")
     return data
 
 
@@ -170,7 +174,8 @@ def import_labelstudio(
     last_frame = n_frames - 1 if n_frames else None
     for where, sequence in ball_regions:
         keys = [_key(path, f"{where}, sequence[{i}]", item) for i, item in enumerate(_list(path, where, sequence))]
-        add_keyframe_track(rows, keys, last_frame=last_frame, end_marker=False)
+        if add_keyframe_track(rows, keys, last_frame=last_frame, end_marker=False):
+            warnings.append(f"{path}: {where}: the ball's last keyframe has interpolation on; rows stop there")
 
     found: dict[int, list[tuple[str, str]]] = {}
     for where, value, names in timeline:
