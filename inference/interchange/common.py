@@ -10,6 +10,7 @@ import shutil
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -125,7 +126,8 @@ class Rows:
             if old[0] > 0 and not same:
                 raise FormatError(
                     self.path,
-                    f"{where}: frame {frame} has a second, different ball position (the first is at {old[3]})",
+                    f"{where}: frame {frame} has a second, different ball position "
+                    f"(the first is at {old[3]})",
                     fix="keep one ball track per frame: delete or split the overlapping track",
                 )
         self.rows[frame] = (int(visibility), float(u), float(v), where)
@@ -152,10 +154,14 @@ def add_keyframe_track(rows: Rows, keys: list[Key], *, last_frame: int | None, e
         True when the track stops on a key that would carry on (the tool repeats it to the end).
     """
     keys = sorted(keys, key=lambda k: k.frame)
-    for a, b in zip(keys, keys[1:]):
+    for a, b in pairwise(keys):
         if a.frame == b.frame:
-            raise FormatError(rows.path, f"{b.where}: a second keyframe on frame {b.frame} in the same track "
-                              f"(the first is at {a.where})", fix="keep one shape per frame and track")
+            raise FormatError(
+                rows.path,
+                f"{b.where}: a second keyframe on frame {b.frame} in the same track "
+                f"(the first is at {a.where})",
+                fix="keep one shape per frame and track",
+            )
     for i, key in enumerate(keys):
         is_last = i == len(keys) - 1
         if is_last and end_marker and key.xy is None and key.frame != last_frame and i > 0:
@@ -176,16 +182,21 @@ def add_keyframe_track(rows: Rows, keys: list[Key], *, last_frame: int | None, e
     return bool(keys) and keys[-1].xy is not None and keys[-1].carry_on and keys[-1].frame != last_frame
 
 
-def labelled_runs(track: BallTrack) -> list[np.ndarray]:
-    """Split a track's row indices into runs of consecutive frames (a gap = frames not labelled)."""
-    if not len(track):
+def runs(frames: np.ndarray) -> list[np.ndarray]:
+    """Indices of sorted ``frames`` split into runs of consecutive frames."""
+    if not len(frames):
         return []
-    cuts = np.flatnonzero(np.diff(track.frame) > 1) + 1
-    return np.split(np.arange(len(track)), cuts)
+    return np.split(np.arange(len(frames)), np.flatnonzero(np.diff(frames) > 1) + 1)
 
 
-def to_unit(path: Path, where: str, x: float, y: float, width: float, height: float,
-            line: int | None = None) -> tuple[float, float]:
+def labelled_runs(track: BallTrack) -> list[np.ndarray]:
+    """A track's row indices in runs of consecutive frames (a gap = frames not labelled)."""
+    return runs(track.frame)
+
+
+def to_unit(
+    path: Path, where: str, x: float, y: float, width: float, height: float, line: int | None = None
+) -> tuple[float, float]:
     """Pixel ``(x, y)`` of a ``width x height`` image -> normalised; a centre off the image is an error.
 
     The error names ``line`` when given (XML), else starts with ``where``.
@@ -195,8 +206,12 @@ def to_unit(path: Path, where: str, x: float, y: float, width: float, height: fl
     if not (np.isfinite(x) and np.isfinite(y)):
         raise FormatError(path, f"{prefix}coordinate is not a finite number", line=line, fix="write numbers")
     if x < -tol or y < -tol or x > width + tol or y > height + tol:
-        raise FormatError(path, f"{prefix}ball centre ({x:g}, {y:g}) lies outside the {width:g}x{height:g} image",
-                          line=line, fix="check the frame size of the task, or mark the ball outside on this frame")
+        raise FormatError(
+            path,
+            f"{prefix}ball centre ({x:g}, {y:g}) lies outside the {width:g}x{height:g} image",
+            line=line,
+            fix="check the frame size of the task, or mark the ball outside on this frame",
+        )
     return min(max(x / width, 0.0), 1.0), min(max(y / height, 0.0), 1.0)
 
 
@@ -232,12 +247,18 @@ def make_events(path: Path, found: Mapping[int, list[tuple[str, str]]], n_frames
         items = sorted(set(found[frame]), key=lambda t: t[1])
         distinct = sorted({e for e, _ in items})
         if len(distinct) > 1:
-            raise FormatError(path, f"frame {frame} has two events, {distinct[0]!r} ({items[0][1]}) and "
-                              f"{distinct[1]!r}", fix="events.csv holds one event per frame: move the later "
-                              "contact to the next frame (docs/formats.md §9)")
+            raise FormatError(
+                path,
+                f"frame {frame} has two events, {distinct[0]!r} ({items[0][1]}) and {distinct[1]!r}",
+                fix="events.csv holds one event per frame: move the later "
+                "contact to the next frame (docs/formats.md §9)",
+            )
         if frame < 0 or (n_frames is not None and frame >= n_frames):
-            raise FormatError(path, f"{items[0][1]}: event on frame {frame}, outside the clip's "
-                              f"{n_frames} frames", fix="delete it or check the task's frame range")
+            raise FormatError(
+                path,
+                f"{items[0][1]}: event on frame {frame}, outside the clip's {n_frames} frames",
+                fix="delete it or check the task's frame range",
+            )
         frames.append(frame)
         labels.append(distinct[0])
     return HitEvents(frames, labels) if frames else HitEvents.empty()
@@ -246,8 +267,11 @@ def make_events(path: Path, found: Mapping[int, list[tuple[str, str]]], n_frames
 def check_frames_in_clip(path: Path, track: BallTrack, n_frames: int | None) -> None:
     """Ball rows must lie inside the clip when its length is known."""
     if n_frames is not None and len(track) and track.frame[-1] >= n_frames:
-        raise FormatError(path, f"ball on frame {int(track.frame[-1])}, but the clip has {n_frames} frames",
-                          fix="check that the task holds this clip's frames (start frame, frame step)")
+        raise FormatError(
+            path,
+            f"ball on frame {int(track.frame[-1])}, but the clip has {n_frames} frames",
+            fix="check that the task holds this clip's frames (start frame, frame step)",
+        )
 
 
 # ------------------------------------------------------------------------------------------ safe XML
@@ -289,8 +313,12 @@ def parse_xml(path: str | Path) -> XmlNode:
     upper = text.upper()
     if "<!DOCTYPE" in upper or "<!ENTITY" in upper:
         line = text[: max(upper.find("<!DOCTYPE"), upper.find("<!ENTITY"))].count("\n") + 1
-        raise FormatError(path, "the XML declares a DOCTYPE or ENTITY, which is refused for safety",
-                          line=line, fix="export the annotations again from CVAT (its files have no DOCTYPE)")
+        raise FormatError(
+            path,
+            "the XML declares a DOCTYPE or ENTITY, which is refused for safety",
+            line=line,
+            fix="export the annotations again from CVAT (its files have no DOCTYPE)",
+        )
 
     class Builder(ContentHandler):
         def __init__(self) -> None:
@@ -298,16 +326,16 @@ def parse_xml(path: str | Path) -> XmlNode:
             self.stack: list[XmlNode] = [XmlNode("#document", {}, 0)]
             self.locator = None
 
-        def setDocumentLocator(self, locator) -> None:  # noqa: N802 (SAX API)
+        def setDocumentLocator(self, locator) -> None:
             self.locator = locator
 
-        def startElement(self, name, attrs) -> None:  # noqa: N802
+        def startElement(self, name, attrs) -> None:
             line = self.locator.getLineNumber() if self.locator else 0
             node = XmlNode(name, {k: attrs[k] for k in attrs.getNames()}, line)
             self.stack[-1].children.append(node)
             self.stack.append(node)
 
-        def endElement(self, name) -> None:  # noqa: N802
+        def endElement(self, name) -> None:
             self.stack.pop()
 
         def characters(self, content) -> None:
@@ -323,11 +351,18 @@ def parse_xml(path: str | Path) -> XmlNode:
         else:
             safe_sax.parseString(data, builder, forbid_dtd=True)
     except xml.sax.SAXParseException as e:
-        raise FormatError(path, f"not well-formed XML ({e.getMessage()}, column {e.getColumnNumber()})",
-                          line=e.getLineNumber(), fix="export the file again; it may be cut short") from None
+        raise FormatError(
+            path,
+            f"not well-formed XML ({e.getMessage()}, column {e.getColumnNumber()})",
+            line=e.getLineNumber(),
+            fix="export the file again; it may be cut short",
+        ) from None
     except ValueError as e:  # defusedxml's DTDForbidden, EntitiesForbidden, ExternalReferenceForbidden
-        raise FormatError(path, f"refused for safety: {type(e).__name__}",
-                          fix="export the annotations again from CVAT (its files have no DOCTYPE)") from None
+        raise FormatError(
+            path,
+            f"refused for safety: {type(e).__name__}",
+            fix="export the annotations again from CVAT (its files have no DOCTYPE)",
+        ) from None
     roots = builder.stack[0].children
     if not roots:
         raise FormatError(path, "no XML element", fix="export the annotations again")
@@ -369,32 +404,59 @@ def write_into_clip(
         if imported.width and imported.height:
             ratio_file, ratio_clip = imported.width / imported.height, info.width / info.height
             if abs(ratio_file / ratio_clip - 1) > 0.01:
-                raise FormatError(clip.clip_yaml_path, f"the clip is {info.width}x{info.height} but the "
-                                  f"imported file is {imported.width}x{imported.height} (another aspect ratio)",
-                                  fix="import into the clip made from the same video")
+                raise FormatError(
+                    clip.clip_yaml_path,
+                    f"the clip is {info.width}x{info.height} but the "
+                    f"imported file is {imported.width}x{imported.height} (another aspect ratio)",
+                    fix="import into the clip made from the same video",
+                )
         n_frames = info.n_frames
         if n_frames and imported.n_frames and imported.n_frames != n_frames:
-            report.append(f"warning: the file states {imported.n_frames} frames, the clip has {n_frames}: "
-                          "check that it was made from this clip's video")
+            report.append(
+                f"warning: the file states {imported.n_frames} frames, the clip has {n_frames}: "
+                "check that it was made from this clip's video"
+            )
     else:
-        missing = [flag for flag, ok in (("--sport", sport), ("--fps", fps or imported.fps),
-                                         ("--width/--height", imported.width and imported.height)) if not ok]
+        missing = [
+            flag
+            for flag, ok in (
+                ("--sport", sport),
+                ("--fps", fps or imported.fps),
+                ("--width/--height", imported.width and imported.height),
+            )
+            if not ok
+        ]
         if missing:
-            raise FormatError(clip.clip_yaml_path, "no clip.yaml yet, and the imported file does not give "
-                              "what a new one needs", fix=f"create the clip first, or pass {' '.join(missing)}")
-        info = ClipInfo(sport=sport, fps=float(fps or imported.fps), width=imported.width,
-                        height=imported.height, video=video or "video.mp4", n_frames=imported.n_frames,
-                        source=imported.source or None)
+            raise FormatError(
+                clip.clip_yaml_path,
+                "no clip.yaml yet, and the imported file does not give what a new one needs",
+                fix=f"create the clip first, or pass {' '.join(missing)}",
+            )
+        info = ClipInfo(
+            sport=sport,
+            fps=float(fps or imported.fps),
+            width=imported.width,
+            height=imported.height,
+            video=video or "video.mp4",
+            n_frames=imported.n_frames,
+            source=imported.source or None,
+        )
         n_frames = info.n_frames
     check_frames_in_clip(clip.root, imported.ball, n_frames)
     if n_frames is not None and len(imported.events) and imported.events.frame[-1] >= n_frames:
-        raise FormatError(clip.root, f"event on frame {int(imported.events.frame[-1])}, but the clip has "
-                          f"{n_frames} frames", fix="check that the task holds this clip's frames")
+        raise FormatError(
+            clip.root,
+            f"event on frame {int(imported.events.frame[-1])}, but the clip has {n_frames} frames",
+            fix="check that the task holds this clip's frames",
+        )
     targets = [(clip.ball_path, len(imported.ball)), (clip.events_path, len(imported.events))]
     existing = [p for p, _ in targets if p.exists()]
     if existing and not overwrite:
-        raise FormatError(existing[0], "exists already; nothing was written",
-                          fix="pass --overwrite to replace it (a backup goes to .rally3d/backup/)")
+        raise FormatError(
+            existing[0],
+            "exists already; nothing was written",
+            fix="pass --overwrite to replace it (a backup goes to .rally3d/backup/)",
+        )
     for p in existing:
         report.append(f"backup {backup(p, clip.root)}")
     if not clip.clip_yaml_path.is_file():

@@ -19,7 +19,7 @@ from inference.clipio import BallTrack, FormatError, HitEvents
 from inference.clipio.atomic import atomic_write_text
 from inference.clipio.csvtable import read_text
 
-from .common import BALL, Imported, Key, LabelMap, Rows, add_keyframe_track, labelled_runs, make_events
+from .common import BALL, Imported, Key, LabelMap, Rows, add_keyframe_track, labelled_runs, make_events, runs
 
 VISIBILITY_LABELS: dict[str, int] = {"out_of_frame": 0, "hard_to_see": 2, "occluded": 3}
 """Timeline labels that set ball.csv's visibility on the frames they cover (default 1)."""
@@ -41,20 +41,30 @@ def _load(path: Path) -> Any:
     try:
         return json.loads(text)
     except json.JSONDecodeError as e:
-        raise FormatError(path, f"not valid JSON ({e.msg}, column {e.colno})", line=e.lineno,
-                          fix="export the project again from Label Studio as JSON") from None
+        raise FormatError(
+            path,
+            f"not valid JSON ({e.msg}, column {e.colno})",
+            line=e.lineno,
+            fix="export the project again from Label Studio as JSON",
+        ) from None
 
 
 def _tasks(path: Path, data: Any) -> list[dict]:
     if isinstance(data, dict):
         data = [data]
     if not isinstance(data, list) or not all(isinstance(t, dict) for t in data):
-        raise FormatError(path, "the JSON is not a list of tasks",
-                          fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)")
+        raise FormatError(
+            path,
+            "the JSON is not a list of tasks",
+            fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)",
+        )
     for i, task in enumerate(data):
         if not {"annotations", "predictions", "data"} & set(task):
-            raise FormatError(path, f"item {i} is not a Label Studio task (no 'data', 'annotations' or "
-                              "'predictions')", fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)")
+            raise FormatError(
+                path,
+                f"item {i} is not a Label Studio task (no 'data', 'annotations' or 'predictions')",
+                fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)",
+            )
     return data
 
 
@@ -80,8 +90,12 @@ def _number(path: Path, where: str, item: dict, key: str, *, required: bool = Tr
 def _frame(path: Path, where: str, item: dict, key: str) -> int:
     value = _number(path, where, item, key)
     if value != int(value) or value < 1:
-        raise _fail(path, where, f"{key!r} is {value:g}, not a frame number >= 1",
-                    fix="Label Studio counts video frames from 1")
+        raise _fail(
+            path,
+            where,
+            f"{key!r} is {value:g}, not a frame number >= 1",
+            fix="Label Studio counts video frames from 1",
+        )
     return int(value) - 1
 
 
@@ -117,9 +131,14 @@ def import_labelstudio(
     if not tasks:
         raise FormatError(path, "the export holds no task", fix="export a project with annotated tasks")
     if len(tasks) > 1 and task is None:
-        listing = "; ".join(f"{t.get('id')}: {str((t.get('data') or {}).get('video', ''))[-40:]}" for t in tasks[:10])
-        raise FormatError(path, f"{len(tasks)} tasks in the file ({listing})",
-                          fix="choose one with --task ID (one task = one clip)")
+        listing = "; ".join(
+            f"{t.get('id')}: {str((t.get('data') or {}).get('video', ''))[-40:]}" for t in tasks[:10]
+        )
+        raise FormatError(
+            path,
+            f"{len(tasks)} tasks in the file ({listing})",
+            fix="choose one with --task ID (one task = one clip)",
+        )
     ti, chosen = _pick(path, tasks, task, "task", "pass an id from the file")
     where_task = f"task {chosen.get('id', ti)}"
     warnings: list[str] = []
@@ -128,12 +147,16 @@ def import_labelstudio(
     if not live:
         preds = [p for p in (chosen.get("predictions") or []) if isinstance(p, dict)]
         if not preds:
-            raise FormatError(path, f"{where_task} has no annotation", fix="annotate the task, or pick another")
+            raise FormatError(
+                path, f"{where_task} has no annotation", fix="annotate the task, or pick another"
+            )
         live = preds
         warnings.append(f"{path}: {where_task} has no annotation; its prediction was read instead")
     if annotation is None and len(live) > 1:
-        warnings.append(f"{path}: {where_task} has {len(live)} annotations; read the first "
-                        f"(id {live[0].get('id')}), choose another with --annotation ID")
+        warnings.append(
+            f"{path}: {where_task} has {len(live)} annotations; read the first "
+            f"(id {live[0].get('id')}), choose another with --annotation ID"
+        )
     ai, ann = _pick(path, live, annotation, "annotation", "pass an annotation id of the task")
     where_ann = f"{where_task}, annotation {ann.get('id', ai)}"
     result = ann.get("result")
@@ -163,8 +186,12 @@ def import_labelstudio(
             elif kind is None:
                 skipped[name] = skipped.get(name, 0) + 1
             elif kind == "event":
-                raise _fail(path, where, f"a tracked box labelled with the event {name!r}",
-                            fix="mark events on the timeline (TimelineLabels), or map the label with --label-map")
+                raise _fail(
+                    path,
+                    where,
+                    f"a tracked box labelled with the event {name!r}",
+                    fix="mark events on the timeline (TimelineLabels), or map the label with --label-map",
+                )
         elif region.get("type") in TIMELINE_TYPES or "ranges" in value:
             timeline.append((where, value, names))
         else:
@@ -173,9 +200,13 @@ def import_labelstudio(
     rows = Rows(path)
     last_frame = n_frames - 1 if n_frames else None
     for where, sequence in ball_regions:
-        keys = [_key(path, f"{where}, sequence[{i}]", item) for i, item in enumerate(_list(path, where, sequence))]
+        keys = [
+            _key(path, f"{where}, sequence[{i}]", item) for i, item in enumerate(_list(path, where, sequence))
+        ]
         if add_keyframe_track(rows, keys, last_frame=last_frame, end_marker=False):
-            warnings.append(f"{path}: {where}: the ball's last keyframe has interpolation on; rows stop there")
+            warnings.append(
+                f"{path}: {where}: the ball's last keyframe has interpolation on; rows stop there"
+            )
 
     found: dict[int, list[tuple[str, str]]] = {}
     for where, value, names in timeline:
@@ -189,15 +220,21 @@ def import_labelstudio(
                 if kind == "event":
                     frame = (start + end) // 2
                     if end > start:
-                        warnings.append(f"{path}: {where_r}: event {name!r} spans frames {start}-{end}; put on "
-                                        f"frame {frame} (mark contacts as single frames)")
+                        warnings.append(
+                            f"{path}: {where_r}: event {name!r} spans frames {start}-{end}; put on "
+                            f"frame {frame} (mark contacts as single frames)"
+                        )
                     found.setdefault(frame, []).append((labels.events[name], where_r))
                 elif kind is None:
                     skipped[name] = skipped.get(name, 0) + 1
                 elif kind == BALL:
-                    raise _fail(path, where_r, f"the ball label {name!r} on the timeline",
-                                fix="draw the ball with a box (VideoRectangle); use out_of_frame, hard_to_see or "
-                                "occluded on the timeline")
+                    raise _fail(
+                        path,
+                        where_r,
+                        f"the ball label {name!r} on the timeline",
+                        fix="draw the ball with a box (VideoRectangle); use out_of_frame, hard_to_see or "
+                        "occluded on the timeline",
+                    )
     for name, count in sorted(skipped.items()):
         warnings.append(f"{path}: skipped {count} region(s) labelled {name!r}: " + labels.unknown_hint(name))
     ball = rows.track()
@@ -219,7 +256,9 @@ def _stated_size(task: dict) -> tuple[int | None, int | None]:
 
 def _list(path: Path, where: str, value: Any) -> list[dict]:
     if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
-        raise _fail(path, where, "'sequence' is not a list of keyframes", fix="export the project again as JSON")
+        raise _fail(
+            path, where, "'sequence' is not a list of keyframes", fix="export the project again as JSON"
+        )
     return value
 
 
@@ -230,8 +269,12 @@ def _key(path: Path, where: str, item: dict) -> Key:
     h = _number(path, where, item, "height", required=False) or 0.0
     u, v = (x + w / 2) / 100, (y + h / 2) / 100
     if not (-1e-3 <= u <= 1 + 1e-3 and -1e-3 <= v <= 1 + 1e-3):
-        raise _fail(path, where, f"ball centre ({100 * u:.3g} %, {100 * v:.3g} %) lies outside the frame",
-                    fix="x, y, width, height are percentages (0-100) of the frame size")
+        raise _fail(
+            path,
+            where,
+            f"ball centre ({100 * u:.3g} %, {100 * v:.3g} %) lies outside the frame",
+            fix="x, y, width, height are percentages (0-100) of the frame size",
+        )
     enabled = item.get("enabled", True)
     if not isinstance(enabled, bool):
         raise _fail(path, where, f"'enabled' is {enabled!r}, not true/false", fix="write true or false")
@@ -245,11 +288,20 @@ def _ranges(path: Path, where: str, value: dict) -> list[tuple[int, int]]:
     out = []
     for i, r in enumerate(ranges):
         if not isinstance(r, dict):
-            raise _fail(path, f"{where}, ranges[{i}]", "is not {start, end}", fix="write {\"start\": F, \"end\": F}")
-        start, end = _frame(path, f"{where}, ranges[{i}]", r, "start"), _frame(path, f"{where}, ranges[{i}]", r, "end")
+            raise _fail(
+                path, f"{where}, ranges[{i}]", "is not {start, end}", fix='write {"start": F, "end": F}'
+            )
+        start, end = (
+            _frame(path, f"{where}, ranges[{i}]", r, "start"),
+            _frame(path, f"{where}, ranges[{i}]", r, "end"),
+        )
         if end < start:
-            raise _fail(path, f"{where}, ranges[{i}]", f"ends (frame {end + 1}) before it starts ({start + 1})",
-                        fix="swap start and end")
+            raise _fail(
+                path,
+                f"{where}, ranges[{i}]",
+                f"ends (frame {end + 1}) before it starts ({start + 1})",
+                fix="swap start and end",
+            )
         out.append((start, end))
     return out
 
@@ -259,23 +311,28 @@ def _set_visibility(rows: Rows, where: str, frames: range, visibility: int) -> N
         old = rows.rows.get(f)
         if visibility == 0:
             if old is not None and old[0] > 0:
-                raise _fail(rows.path, where, f"frame {f + 1} is out_of_frame but has a ball box ({old[3]})",
-                            fix="shorten the out_of_frame span or delete the box on that frame")
+                raise _fail(
+                    rows.path,
+                    where,
+                    f"frame {f + 1} is out_of_frame but has a ball box ({old[3]})",
+                    fix="shorten the out_of_frame span or delete the box on that frame",
+                )
             rows.rows[f] = (0, np.nan, np.nan, where)
         else:
             if old is None or old[0] == 0:
-                raise _fail(rows.path, where, f"frame {f + 1} is marked {visibility} (hard to see/occluded) but "
-                            "has no ball box", fix="draw the box on that frame or shorten the span")
+                raise _fail(
+                    rows.path,
+                    where,
+                    f"frame {f + 1} is marked {visibility} (hard to see/occluded) but has no ball box",
+                    fix="draw the box on that frame or shorten the span",
+                )
             rows.rows[f] = (visibility, old[1], old[2], old[3])
 
 
 # ---------------------------------------------------------------------------------------------- export
 def _spans(frames: np.ndarray) -> list[tuple[int, int]]:
     """Consecutive runs of sorted ``frames`` as ``(first, last)``."""
-    if not frames.size:
-        return []
-    cuts = np.flatnonzero(np.diff(frames) > 1) + 1
-    return [(int(part[0]), int(part[-1])) for part in np.split(frames, cuts)]
+    return [(int(frames[i[0]]), int(frames[i[-1]])) for i in runs(frames)]
 
 
 def export_labelstudio(
@@ -310,24 +367,64 @@ def export_labelstudio(
             hw, hh = min(half_w, u, 1 - u), min(half_h, v, 1 - v)
             nxt = i + 1
             enabled = bool(nxt in visible and track.frame[nxt] == track.frame[i] + 1)
-            sequence.append({"frame": int(track.frame[i]) + 1, "enabled": enabled, "rotation": 0,
-                             "x": 100 * (u - hw), "y": 100 * (v - hh), "width": 200 * hw, "height": 200 * hh,
-                             "time": round(int(track.frame[i]) / fps, 6)})
-        result.append({"id": f"ball{r}", "type": "videorectangle", "from_name": BOX_NAME, "to_name": "video",
-                       "origin": "manual", "value": {"framesCount": n_frames, "duration": n_frames / fps,
-                                                     "labels": [BALL], "sequence": sequence}})
+            sequence.append(
+                {
+                    "frame": int(track.frame[i]) + 1,
+                    "enabled": enabled,
+                    "rotation": 0,
+                    "x": 100 * (u - hw),
+                    "y": 100 * (v - hh),
+                    "width": 200 * hw,
+                    "height": 200 * hh,
+                    "time": round(int(track.frame[i]) / fps, 6),
+                }
+            )
+        result.append(
+            {
+                "id": f"ball{r}",
+                "type": "videorectangle",
+                "from_name": BOX_NAME,
+                "to_name": "video",
+                "origin": "manual",
+                "value": {
+                    "framesCount": n_frames,
+                    "duration": n_frames / fps,
+                    "labels": [BALL],
+                    "sequence": sequence,
+                },
+            }
+        )
     for name, code in VISIBILITY_LABELS.items():
         spans = _spans(track.frame[track.visibility == code])
         if spans:
-            result.append({"id": f"vis_{name}", "type": "timelinelabels", "from_name": TIMELINE_NAME,
-                           "to_name": "video", "origin": "manual",
-                           "value": {"ranges": [{"start": a + 1, "end": b + 1} for a, b in spans],
-                                     "timelinelabels": [name]}})
+            result.append(
+                {
+                    "id": f"vis_{name}",
+                    "type": "timelinelabels",
+                    "from_name": TIMELINE_NAME,
+                    "to_name": "video",
+                    "origin": "manual",
+                    "value": {
+                        "ranges": [{"start": a + 1, "end": b + 1} for a, b in spans],
+                        "timelinelabels": [name],
+                    },
+                }
+            )
     for k, (frame, label) in enumerate(zip(events.frame.tolist(), events.event.tolist())):
-        result.append({"id": f"event{k}", "type": "timelinelabels", "from_name": TIMELINE_NAME, "to_name": "video",
-                       "origin": "manual", "value": {"ranges": [{"start": frame + 1, "end": frame + 1}],
-                                                     "timelinelabels": [label]}})
-    task = {"id": task_id, "data": {"video": video_url},
-            "annotations": [{"id": 1, "was_cancelled": False, "result": result}],
-            "meta": {"rally3d": {"width": width, "height": height, "fps": fps}}}
+        result.append(
+            {
+                "id": f"event{k}",
+                "type": "timelinelabels",
+                "from_name": TIMELINE_NAME,
+                "to_name": "video",
+                "origin": "manual",
+                "value": {"ranges": [{"start": frame + 1, "end": frame + 1}], "timelinelabels": [label]},
+            }
+        )
+    task = {
+        "id": task_id,
+        "data": {"video": video_url},
+        "annotations": [{"id": 1, "was_cancelled": False, "result": result}],
+        "meta": {"rally3d": {"width": width, "height": height, "fps": fps}},
+    }
     return atomic_write_text(path, json.dumps([task], indent=1) + "\n")

@@ -1,5 +1,6 @@
 """CVAT for video 1.1 and Label Studio video JSON <-> clip folders: round trips, hand-written files in the
 documented layouts, clear errors on bad input, safe XML, and the `rally3d import/export` commands."""
+
 from __future__ import annotations
 
 import json
@@ -19,8 +20,10 @@ from inference.interchange.labelstudio import import_labelstudio
 
 REPO = Path(__file__).resolve().parents[3]
 SAMPLE = REPO / "datasets" / "sample" / "padel_sample"
-COMMANDS = {"import": "inference.interchange.cli:register_import",
-            "export": "inference.interchange.cli:register_export"}
+COMMANDS = {
+    "import": "inference.interchange.cli:register_import",
+    "export": "inference.interchange.cli:register_export",
+}
 
 
 @pytest.fixture
@@ -42,20 +45,26 @@ def test_entry_points_are_declared():
 def _awkward_clip(root: Path) -> Clip:
     """A 1920x1080 clip whose ball.csv has every case: gaps (not labelled), visibility 0-3, a run that
     starts hidden, one that ends hidden, one that ends hidden on the clip's last frame; and events."""
-    clip = Clip.create(root, ClipInfo(sport="padel", fps=25.0, width=1920, height=1080, video="video.mp4",
-                                      n_frames=60))
-    rows = ([(f, 1) for f in range(0, 6)] + [(6, 2), (7, 3), (8, 0), (9, 0), (10, 1), (11, 3)]  # run 0-11
-            + [(20, 0), (21, 0), (22, 1), (23, 1), (24, 0)]                                  # hidden ends
-            + [(30, 1)]                                                                    # one frame
-            + [(40, 2), (41, 1), (42, 1), (43, 0)]                                         # hard, ends hidden
-            + [(57, 1), (58, 1), (59, 0)])                                                 # to the last frame
+    clip = Clip.create(
+        root, ClipInfo(sport="padel", fps=25.0, width=1920, height=1080, video="video.mp4", n_frames=60)
+    )
+    rows = (
+        [(f, 1) for f in range(0, 6)]
+        + [(6, 2), (7, 3), (8, 0), (9, 0), (10, 1), (11, 3)]  # run 0-11
+        + [(20, 0), (21, 0), (22, 1), (23, 1), (24, 0)]  # hidden ends
+        + [(30, 1)]  # one frame
+        + [(40, 2), (41, 1), (42, 1), (43, 0)]  # hard, ends hidden
+        + [(57, 1), (58, 1), (59, 0)]
+    )  # to the last frame
     frame = [f for f, _ in rows]
     vis = [v for _, v in rows]
     rng = np.random.default_rng(3)
     xy = [[rng.uniform(0, 1), rng.uniform(0, 1)] if v else [np.nan, np.nan] for v in vis]
     xy[0] = [0.0, 1.0]  # on the image border
     clip.write_ball(BallTrack(frame, vis, xy))
-    clip.write_events(HitEvents([3, 9, 22, 30, 45], ["player_near", "ground", "wall_left", "net", "player_far"]))
+    clip.write_events(
+        HitEvents([3, 9, 22, 30, 45], ["player_near", "ground", "wall_left", "net", "player_far"])
+    )
     return clip
 
 
@@ -89,15 +98,21 @@ def test_round_trip_through_the_commands(rally3d, clip, tmp_path, suffix, capsys
     back = Clip(new)
     _same_ball(clip.read_ball(), back.read_ball())
     assert back.read_events() == clip.read_events()
-    assert (back.info.width, back.info.height, back.info.n_frames) == (clip.info.width, clip.info.height,
-                                                                        clip.info.n_frames)
+    assert (back.info.width, back.info.height, back.info.n_frames) == (
+        clip.info.width,
+        clip.info.height,
+        clip.info.n_frames,
+    )
     if suffix == ".json":
         assert back.info.fps == pytest.approx(clip.info.fps)
     # and once more into the same folder: refused without --overwrite, backed up with it
     assert rally3d(["import", str(out), str(new)]) == 1
     assert "--overwrite" in capsys.readouterr().err
     assert rally3d(["import", str(out), str(new), "--overwrite"]) == 0
-    assert sorted(p.name.split(".csv")[0] for p in (new / ".rally3d" / "backup").iterdir()) == ["ball", "events"]
+    assert sorted(p.name.split(".csv")[0] for p in (new / ".rally3d" / "backup").iterdir()) == [
+        "ball",
+        "events",
+    ]
     _same_ball(clip.read_ball(), back.read_ball())
 
 
@@ -107,8 +122,14 @@ def test_cvat_export_follows_cvat_conventions(clip, tmp_path):
     from inference.interchange.cvat import export_cvat
 
     track, events = clip.read_ball(), clip.read_events()
-    out = export_cvat(tmp_path / "a.xml", track, events, width=clip.info.width, height=clip.info.height,
-                      n_frames=clip.info.n_frames)
+    out = export_cvat(
+        tmp_path / "a.xml",
+        track,
+        events,
+        width=clip.info.width,
+        height=clip.info.height,
+        n_frames=clip.info.n_frames,
+    )
     root = parse_xml(out)
     assert root.findtext("meta/task/original_size/width") == str(clip.info.width)
     balls = [t for t in root.findall("track") if t.attrib["label"] == "ball"]
@@ -117,7 +138,9 @@ def test_cvat_export_follows_cvat_conventions(clip, tmp_path):
     n_runs = 1 + int(np.sum(np.diff(track.frame) > 1))
     assert len(balls) == n_runs
     rows = set(track.frame.tolist())
-    closing = [t.findall("points")[-1] for t in balls if int(t.findall("points")[-1].attrib["frame"]) not in rows]
+    closing = [
+        t.findall("points")[-1] for t in balls if int(t.findall("points")[-1].attrib["frame"]) not in rows
+    ]
     assert all(s.attrib["outside"] == "1" for s in closing)
     assert len(closing) == n_runs - int(track.frame[-1] == clip.info.n_frames - 1)
     event_tracks = [t for t in root.findall("track") if t.attrib["label"] != "ball"]
@@ -148,7 +171,9 @@ def _cvat(tmp_path: Path, body: str, size: int = 30) -> Path:
 def test_cvat_handwritten_file_imports_to_expected_rows(tmp_path):
     """A file as an annotator leaves it: keyframes only (CVAT interpolates between them), occluded and
     outside keys, an ellipse track, a box track, a tag, an event drawn as a shape, an unknown label."""
-    path = _cvat(tmp_path, """
+    path = _cvat(
+        tmp_path,
+        """
   <track id="0" label="ball" source="manual">
     <points frame="0" keyframe="1" outside="0" occluded="0" points="100.00,200.00" z_order="0"/>
     <points frame="4" keyframe="1" outside="0" occluded="1" points="140.00,240.00" z_order="0"/>
@@ -160,11 +185,11 @@ def test_cvat_handwritten_file_imports_to_expected_rows(tmp_path):
     <points frame="10" keyframe="1" outside="1" occluded="0" points="640.00,360.00" z_order="0"/>
   </track>
   <track id="1" label="ball" source="manual">
-    <ellipse frame="15" keyframe="1" outside="0" occluded="0" cx="1280.00" cy="0.00" rx="5.00" ry="5.00" z_order="0"/>
-    <ellipse frame="16" keyframe="1" outside="1" occluded="0" cx="1280.00" cy="0.00" rx="5.00" ry="5.00" z_order="0"/>
+    <ellipse frame="15" keyframe="1" outside="0" occluded="0" cx="1280.00" cy="0.00" rx="5.00" ry="5.00"/>
+    <ellipse frame="16" keyframe="1" outside="1" occluded="0" cx="1280.00" cy="0.00" rx="5.00" ry="5.00"/>
   </track>
   <track id="2" label="ball" source="manual">
-    <box frame="20" keyframe="1" outside="0" occluded="0" xtl="10.00" ytl="20.00" xbr="30.00" ybr="40.00" z_order="0"/>
+    <box frame="20" keyframe="1" outside="0" occluded="0" xtl="10.00" ytl="20.00" xbr="30.00" ybr="40.00"/>
   </track>
   <track id="3" label="player_near" source="manual">
     <points frame="4" keyframe="1" outside="0" occluded="0" points="140.00,240.00" z_order="0"/>
@@ -174,14 +199,17 @@ def test_cvat_handwritten_file_imports_to_expected_rows(tmp_path):
     <box frame="0" keyframe="1" outside="0" occluded="0" xtl="1" ytl="1" xbr="9" ybr="9" z_order="0"/>
   </track>
   <tag frame="9" label="ground" source="manual"/>
-""")
+""",
+    )
     got = import_cvat(path)
     expected_frames = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 20]
     expected_vis = [1, 1, 1, 1, 3, 2, 0, 0, 0, 1, 1, 1]
     np.testing.assert_array_equal(got.ball.frame, expected_frames)
     np.testing.assert_array_equal(got.ball.visibility, expected_vis)
     px = got.ball.to_pixels(1280, 720)
-    np.testing.assert_allclose(px[:6], [[100, 200], [110, 210], [120, 220], [130, 230], [140, 240], [150, 250]])
+    np.testing.assert_allclose(
+        px[:6], [[100, 200], [110, 210], [120, 220], [130, 230], [140, 240], [150, 250]]
+    )
     assert np.isnan(px[6:9]).all()
     np.testing.assert_allclose(px[9:], [[640, 360], [1280, 0], [20, 30]])
     assert got.events == HitEvents([4, 9], ["player_near", "ground"])
@@ -197,8 +225,11 @@ def test_cvat_label_map_and_frame_step(tmp_path):
   <tag frame="12" label="bounce" source="manual"/>
 """
     path = _cvat(tmp_path, body.replace("\n", "\n"))
-    text = path.read_text().replace("<start_frame>0</start_frame>", "<start_frame>10</start_frame>").replace(
-        "<frame_filter></frame_filter>", "<frame_filter>step=2</frame_filter>")
+    text = (
+        path.read_text()
+        .replace("<start_frame>0</start_frame>", "<start_frame>10</start_frame>")
+        .replace("<frame_filter></frame_filter>", "<frame_filter>step=2</frame_filter>")
+    )
     path.write_text(text)
     got = import_cvat(path, LabelMap.parse(["pelota=ball", "bounce=ground"]))
     np.testing.assert_array_equal(got.ball.frame, [0, 1, 2])  # video frames 10, 12, 14
@@ -210,34 +241,67 @@ def test_cvat_label_map_and_frame_step(tmp_path):
 
 # ------------------------------------------------------------------------ hand-written Label Studio file
 def _ls_task(result: list, task_id: int = 1) -> dict:
-    return {"id": task_id, "data": {"video": "/data/upload/1/rally.mp4"},
-            "annotations": [{"id": 11, "was_cancelled": False, "result": result}]}
+    return {
+        "id": task_id,
+        "data": {"video": "/data/upload/1/rally.mp4"},
+        "annotations": [{"id": 11, "was_cancelled": False, "result": result}],
+    }
 
 
 def _box(seq: list, labels=("ball",)) -> dict:
-    return {"id": "b1", "type": "videorectangle", "from_name": "box", "to_name": "video", "origin": "manual",
-            "value": {"framesCount": 50, "duration": 2.0, "labels": list(labels), "sequence": seq}}
+    return {
+        "id": "b1",
+        "type": "videorectangle",
+        "from_name": "box",
+        "to_name": "video",
+        "origin": "manual",
+        "value": {"framesCount": 50, "duration": 2.0, "labels": list(labels), "sequence": seq},
+    }
 
 
 def _timeline(label: str, ranges: list) -> dict:
-    return {"id": f"t{label}", "type": "timelinelabels", "from_name": "events", "to_name": "video",
-            "value": {"ranges": [{"start": a, "end": b} for a, b in ranges], "timelinelabels": [label]}}
+    return {
+        "id": f"t{label}",
+        "type": "timelinelabels",
+        "from_name": "events",
+        "to_name": "video",
+        "value": {"ranges": [{"start": a, "end": b} for a, b in ranges], "timelinelabels": [label]},
+    }
 
 
 def _kf(frame, x, y, enabled=True, w=2.0, h=4.0):
-    return {"frame": frame, "enabled": enabled, "rotation": 0, "x": x, "y": y, "width": w, "height": h,
-            "time": (frame - 1) / 25}
+    return {
+        "frame": frame,
+        "enabled": enabled,
+        "rotation": 0,
+        "x": x,
+        "y": y,
+        "width": w,
+        "height": h,
+        "time": (frame - 1) / 25,
+    }
 
 
 def test_labelstudio_handwritten_file_imports_to_expected_rows(tmp_path):
     """1-based frames, percentages, interpolation while `enabled`, hidden after a disabled keyframe,
     visibility spans and events on the timeline, a keypoint sequence (no width/height)."""
     seq = [_kf(1, 9, 18), _kf(5, 13, 22, enabled=False), _kf(8, 49, 48), _kf(10, 49, 48, enabled=False)]
-    keypoints = {"id": "k1", "type": "videokeypoint", "to_name": "video", "from_name": "kp",
-                 "value": {"labels": ["ball"], "sequence": [{"frame": 20, "x": 100.0, "y": 0.0, "enabled": False}]}}
-    result = [_box(seq), keypoints, _timeline("ground", [(3, 3)]), _timeline("player_far", [(9, 9)]),
-              _timeline("occluded", [(8, 9)]), _timeline("out_of_frame", [(11, 12)]),
-              _timeline("serve", [(1, 1)])]
+    keypoints = {
+        "id": "k1",
+        "type": "videokeypoint",
+        "to_name": "video",
+        "from_name": "kp",
+        "value": {"labels": ["ball"], "sequence": [{"frame": 20, "x": 100.0, "y": 0.0, "enabled": False}]},
+    }
+    result = [
+        _box(seq),
+        keypoints,
+        _timeline("ground", [(3, 3)]),
+        _timeline("player_far", [(9, 9)]),
+        _timeline("occluded", [(8, 9)]),
+        _timeline("out_of_frame", [(11, 12)]),
+        _timeline("serve", [(1, 1)]),
+    ]
     path = tmp_path / "export.json"
     path.write_text(json.dumps([_ls_task(result)]))
     got = import_labelstudio(path)
@@ -271,25 +335,50 @@ EXTERNAL = """<?xml version="1.0"?>
 <!DOCTYPE annotations SYSTEM "http://example.invalid/evil.dtd">
 <annotations/>
 """
-POINT = '<track id="0" label="ball"><points frame="{f}" keyframe="1" outside="0" occluded="0" points="{p}"/></track>'
+POINT = (
+    '<track id="0" label="ball"><points frame="{f}" keyframe="1" outside="0" occluded="0" points="{p}"/>'
+    "</track>"
+)
 
 BAD_CVAT = [
     ("entities", BILLION_LAUGHS, ["DOCTYPE or ENTITY", "line 2"]),
     ("external dtd", EXTERNAL, ["refused for safety"]),
-    ("truncated", CVAT_META.format(size=5, stop=4) + '  <track id="0" label="ball">\n    <points frame="1"',
-     ["not well-formed XML", "fix:"]),
-    ("two points", CVAT_META.format(size=5, stop=4) + POINT.format(f=1, p="1,1;2,2") + "</annotations>",
-     ["line 12", "exactly one"]),
-    ("frame text", CVAT_META.format(size=5, stop=4) + POINT.format(f="one", p="1,1") + "</annotations>",
-     ["line 12", "frame='one'", "whole number"]),
-    ("off image", CVAT_META.format(size=5, stop=4) + POINT.format(f=1, p="1300,10") + "</annotations>",
-     ["line 12", "outside the 1280x720 image"]),
-    ("past the end", CVAT_META.format(size=5, stop=4) + POINT.format(f=7, p="10,10") + "</annotations>",
-     ["frame 7", "5 frames"]),
-    ("two events", CVAT_META.format(size=5, stop=4) + '<tag frame="2" label="ground"/><tag frame="2" label="net"/>'
-     "</annotations>", ["frame 2 has two events", "next frame"]),
-    ("images", CVAT_META.format(size=5, stop=4) + '<image id="0" name="a.jpg"/></annotations>',
-     ["CVAT for images", "CVAT for video 1.1"]),
+    (
+        "truncated",
+        CVAT_META.format(size=5, stop=4) + '  <track id="0" label="ball">\n    <points frame="1"',
+        ["not well-formed XML", "fix:"],
+    ),
+    (
+        "two points",
+        CVAT_META.format(size=5, stop=4) + POINT.format(f=1, p="1,1;2,2") + "</annotations>",
+        ["line 12", "exactly one"],
+    ),
+    (
+        "frame text",
+        CVAT_META.format(size=5, stop=4) + POINT.format(f="one", p="1,1") + "</annotations>",
+        ["line 12", "frame='one'", "whole number"],
+    ),
+    (
+        "off image",
+        CVAT_META.format(size=5, stop=4) + POINT.format(f=1, p="1300,10") + "</annotations>",
+        ["line 12", "outside the 1280x720 image"],
+    ),
+    (
+        "past the end",
+        CVAT_META.format(size=5, stop=4) + POINT.format(f=7, p="10,10") + "</annotations>",
+        ["frame 7", "5 frames"],
+    ),
+    (
+        "two events",
+        CVAT_META.format(size=5, stop=4) + '<tag frame="2" label="ground"/><tag frame="2" label="net"/>'
+        "</annotations>",
+        ["frame 2 has two events", "next frame"],
+    ),
+    (
+        "images",
+        CVAT_META.format(size=5, stop=4) + '<image id="0" name="a.jpg"/></annotations>',
+        ["CVAT for images", "CVAT for video 1.1"],
+    ),
     ("no meta", "<annotations><version>1.1</version></annotations>", ["no <meta>"]),
 ]
 
@@ -309,14 +398,21 @@ def test_bad_cvat_files_get_clear_errors(rally3d, tmp_path, capsys, name, text, 
 BAD_LS = [
     ("not json", '[{"id": 1,\n "data": }]', ["not valid JSON", "line 2"]),
     ("not tasks", '{"foo": 1}', ["item 0 is not a Label Studio task"]),
-    ("no annotation", '[{"id": 4, "data": {"video": "v.mp4"}, "annotations": []}]', ["task 4 has no annotation"]),
+    (
+        "no annotation",
+        '[{"id": 4, "data": {"video": "v.mp4"}, "annotations": []}]',
+        ["task 4 has no annotation"],
+    ),
     ("csv export", '"a,b"', ["not a list of tasks", "JSON-MIN"]),
     ("frame 0", [_ls_task([_box([_kf(0, 10, 10)])])], ["sequence[0]", "counts video frames from 1"]),
     ("x text", [_ls_task([_box([{"frame": 1, "x": "ten", "y": 1}])])], ["sequence[0]", "'x' is 'ten'"]),
     ("off frame", [_ls_task([_box([_kf(1, 150, 10)])])], ["outside the frame", "percentages"]),
     ("two tasks", [_ls_task([], 1), _ls_task([], 2)], ["2 tasks", "--task ID"]),
-    ("out but boxed", [_ls_task([_box([_kf(1, 10, 10)]), _timeline("out_of_frame", [(1, 1)])])],
-     ["out_of_frame but has a ball box"]),
+    (
+        "out but boxed",
+        [_ls_task([_box([_kf(1, 10, 10)]), _timeline("out_of_frame", [(1, 1)])])],
+        ["out_of_frame but has a ball box"],
+    ),
     ("occluded no box", [_ls_task([_timeline("occluded", [(4, 6)])])], ["frame 4", "has no ball box"]),
     ("backwards", [_ls_task([_timeline("ground", [(6, 4)])])], ["ranges[0]", "swap start and end"]),
     ("event box", [_ls_task([_box([_kf(1, 10, 10)], labels=("ground",))])], ["TimelineLabels"]),
@@ -327,8 +423,22 @@ BAD_LS = [
 def test_bad_labelstudio_files_get_clear_errors(rally3d, tmp_path, capsys, name, content, words):
     path = tmp_path / "export.json"
     path.write_text(content if isinstance(content, str) else json.dumps(content))
-    assert rally3d(["import", str(path), str(tmp_path / "clip"), "--sport", "padel", "--width", "1280",
-                    "--height", "720"]) == 1
+    assert (
+        rally3d(
+            [
+                "import",
+                str(path),
+                str(tmp_path / "clip"),
+                "--sport",
+                "padel",
+                "--width",
+                "1280",
+                "--height",
+                "720",
+            ]
+        )
+        == 1
+    )
     err = capsys.readouterr().err
     assert str(path) in err and "fix:" in err and "Traceback" not in err
     for word in words:
@@ -352,11 +462,31 @@ def test_new_clip_needs_sport_and_fps(rally3d, tmp_path, capsys):
     assert rally3d(["import", str(path), str(tmp_path / "clip")]) == 1
     err = capsys.readouterr().err
     assert "--sport" in err and "--fps" in err
-    assert rally3d(["import", str(path), str(tmp_path / "clip"), "--sport", "tennis", "--fps", "50",
-                    "--video", "../match.mp4"]) == 0
+    assert (
+        rally3d(
+            [
+                "import",
+                str(path),
+                str(tmp_path / "clip"),
+                "--sport",
+                "tennis",
+                "--fps",
+                "50",
+                "--video",
+                "../match.mp4",
+            ]
+        )
+        == 0
+    )
     info = Clip(tmp_path / "clip").info
     assert (info.sport, info.fps, info.width, info.height, info.video, info.n_frames) == (
-        "tennis", 50.0, 1280, 720, "../match.mp4", 30)
+        "tennis",
+        50.0,
+        1280,
+        720,
+        "../match.mp4",
+        30,
+    )
     assert "CVAT task 'rally 7'" in info.source
 
 
