@@ -365,8 +365,8 @@ def export_labelstudio(
         for i in visible:
             u, v = xy[i]
             hw, hh = min(half_w, u, 1 - u), min(half_h, v, 1 - v)
-            nxt = i + 1
-            enabled = bool(nxt in visible and track.frame[nxt] == track.frame[i] + 1)
+            # a run holds consecutive frames, so the next row of the run is the next frame
+            enabled = bool(i + 1 <= run[-1] and track.visibility[i + 1] > 0)
             sequence.append(
                 {
                     "frame": int(track.frame[i]) + 1,
