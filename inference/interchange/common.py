@@ -379,6 +379,14 @@ def backup(path: Path, clip_root: Path) -> Path:
     return dest
 
 
+def _known_frames(clip: Clip) -> int | None:
+    """The clip's frame count: clip.yaml's, else the video's; None when neither can be read."""
+    try:
+        return clip.n_frames
+    except (FormatError, FileNotFoundError, OSError):
+        return None
+
+
 def write_into_clip(
     clip_root: str | Path,
     imported: Imported,
@@ -410,7 +418,7 @@ def write_into_clip(
                     f"imported file is {imported.width}x{imported.height} (another aspect ratio)",
                     fix="import into the clip made from the same video",
                 )
-        n_frames = info.n_frames
+        n_frames = _known_frames(clip)
         if n_frames and imported.n_frames and imported.n_frames != n_frames:
             report.append(
                 f"warning: the file states {imported.n_frames} frames, the clip has {n_frames}: "

@@ -499,6 +499,22 @@ def test_import_refuses_another_aspect_ratio(rally3d, tmp_path, capsys):
     assert "aspect ratio" in capsys.readouterr().err
 
 
+def test_import_checks_frames_against_the_video(rally3d, tmp_path, capsys):
+    """A clip.yaml without n_frames: the frames folder's length bounds the rows."""
+    from inference.clipio import write_frames_folder
+
+    root = tmp_path / "clip"
+    Clip.create(root, ClipInfo(sport="padel", fps=30.0, width=64, height=36, video="frames/"))
+    write_frames_folder(root / "frames", [np.zeros((36, 64, 3), np.uint8)] * 5)
+    path = _cvat(tmp_path, POINT.format(f=7, p="640,360") + "\n", size=40)
+    assert rally3d(["import", str(path), str(root)]) == 1
+    assert "ball on frame 7, but the clip has 5 frames" in capsys.readouterr().err
+    path = _cvat(tmp_path, POINT.format(f=4, p="640,360") + "\n", size=40)
+    assert rally3d(["import", str(path), str(root)]) == 0
+    assert "the file states 40 frames, the clip has 5" in capsys.readouterr().out
+    np.testing.assert_array_equal(Clip(root).read_ball().frame, [4])
+
+
 def test_export_never_overwrites_without_backup(rally3d, tmp_path, capsys):
     clip = _awkward_clip(tmp_path / "c")
     out = tmp_path / "out.json"
