@@ -108,7 +108,7 @@ def run_import(args: argparse.Namespace) -> int:
         f"{imported.source}: {len(imported.ball)} ball rows ({visible} visible), "
         f"{len(imported.events)} events"
         + (f", {imported.n_frames} frames" if imported.n_frames else "")
-        + (f", {imported.fps:g} fps (framesCount / duration)" if imported.fps else "")
+        + (f", {imported.fps:g} fps" if imported.fps else "")
     )
     if args.dry_run:
         print("dry run: nothing written")

@@ -239,7 +239,11 @@ def import_labelstudio(
         warnings.append(f"{path}: skipped {count} region(s) labelled {name!r}: " + labels.unknown_hint(name))
     ball = rows.track()
     events = make_events(path, found, n_frames)
-    video = str((chosen.get("data") or {}).get("video", ""))
+    data = chosen.get("data") if isinstance(chosen.get("data"), dict) else {}
+    video = str(data.get("video", ""))
+    stated_fps = data.get("fps")
+    if isinstance(stated_fps, (int, float)) and not isinstance(stated_fps, bool) and stated_fps > 0:
+        fps = float(stated_fps)  # the task's own frame rate (the labeling config's frameRate="$fps")
     source = f"Label Studio task {chosen.get('id')}" + (f" ({Path(video).name})" if video else "")
     width, height = _stated_size(chosen)
     return Imported(ball, events, width, height, n_frames, fps, source, warnings)
@@ -423,7 +427,7 @@ def export_labelstudio(
         )
     task = {
         "id": task_id,
-        "data": {"video": video_url},
+        "data": {"video": video_url, "fps": fps},
         "annotations": [{"id": 1, "was_cancelled": False, "result": result}],
         "meta": {"rally3d": {"width": width, "height": height, "fps": fps}},
     }

@@ -311,8 +311,12 @@ def test_labelstudio_handwritten_file_imports_to_expected_rows(tmp_path):
     np.testing.assert_allclose(pct[:5], [[10, 20], [11, 21], [12, 22], [13, 23], [14, 24]])
     np.testing.assert_allclose(pct[[7, 8, 9, 12]], [[50, 50], [50, 50], [50, 50], [100, 0]])
     assert got.events == HitEvents([2, 8], ["ground", "player_far"])
-    assert (got.n_frames, got.fps) == (50, 25.0)
+    assert (got.n_frames, got.fps) == (50, 25.0)  # framesCount / duration
     assert any("'serve'" in w for w in got.warnings)
+    task = _ls_task(result)
+    task["data"]["fps"] = 29.97
+    path.write_text(json.dumps([task]))
+    assert import_labelstudio(path).fps == 29.97  # the task's own frame rate comes first
 
 
 def test_labelstudio_picks_the_task_and_annotation(tmp_path):
