@@ -304,7 +304,7 @@ def _shape(
 ) -> str:
     attrs = (
         f'frame="{frame}" keyframe="1" outside="{int(outside)}" occluded="{int(occluded)}" '
-        f'points="{xy_px[0]:.4f},{xy_px[1]:.4f}" z_order="0"'
+        f'points="{xy_px[0]:.6f},{xy_px[1]:.6f}" z_order="0"'
     )
     if visibility is None:
         return f"    <points {attrs}>\n    </points>\n"
@@ -354,7 +354,7 @@ def export_cvat(
     the position, ``occluded`` for visibility 3, the ``visibility`` attribute 1..3; visibility 0:
     ``outside``), closed by an ``outside`` shape on the frame after the run. Each event is a one-frame
     points track labelled with the event, on the ball's position (the image centre when unknown).
-    Pixels with 4 decimals; CVAT re-interpolates only between keyframes, so every row is one.
+    Pixels with 6 decimals; CVAT re-interpolates only between keyframes, so every row is one.
     """
     size = np.array([width, height], dtype=float)
     centre = (width / 2, height / 2)
