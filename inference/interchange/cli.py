@@ -167,30 +167,15 @@ def run_export(args: argparse.Namespace) -> int:
         kept = args.out.with_name(f"{args.out.name}.{time.strftime('%Y%m%d-%H%M%S')}.bak")
         shutil.copy2(args.out, kept)
         print(f"backup {kept}")
+    size = {"width": info.width, "height": info.height, "n_frames": n_frames}
     if fmt == "cvat":
         from .cvat import export_cvat
 
-        path = export_cvat(
-            args.out,
-            track,
-            events,
-            width=info.width,
-            height=info.height,
-            n_frames=n_frames,
-            name=clip.root.resolve().name,
-        )
+        path = export_cvat(args.out, track, events, **size, name=clip.root.resolve().name)
     else:
         from .labelstudio import export_labelstudio
 
-        path = export_labelstudio(
-            args.out,
-            track,
-            events,
-            width=info.width,
-            height=info.height,
-            n_frames=n_frames,
-            fps=info.fps,
-            video_url=args.video_url or info.video,
-        )
+        video_url = args.video_url or info.video
+        path = export_labelstudio(args.out, track, events, **size, fps=info.fps, video_url=video_url)
     print(f"wrote {path}: {len(track)} ball rows, {len(events)} events, {n_frames} frames ({fmt})")
     return 0
