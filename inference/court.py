@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from inference.clipio.errors import FormatError
+from inference.clipio.structured import load_yaml
 
 #: Where the court YAML files live: ``$RALLY3D_CONF/court`` or the repository's ``conf/court``.
 CONF_DIR = Path(os.environ.get("RALLY3D_CONF", Path(__file__).resolve().parent.parent / "conf"))
@@ -250,6 +250,14 @@ class Court:
         """The distinct surface-contact labels of this court, in plane order."""
         return list(dict.fromkeys(p.event for p in self.planes))
 
+    @property
+    def annotation_labels(self) -> list[str]:
+        """The labels an ``events.csv`` of this court may hold: its surfaces, then the two player hits."""
+        from inference.clipio.tables import EVENT_LABELS
+
+        surfaces = [e for e in self.event_labels if e in EVENT_LABELS]
+        return list(dict.fromkeys([*surfaces, "player_near", "player_far"]))
+
     def off_ground_points(self, tol: float = 1e-6) -> list[str]:
         """Names of points with z ≠ 0 (needed to calibrate a camera)."""
         return [n for n, p in self.points.items() if abs(p[2]) > tol]
@@ -282,10 +290,7 @@ def _vec3(path: Path, where: str, value) -> np.ndarray:
 def load_court(name_or_path: str | Path) -> Court:
     """Load a court YAML (by name under ``conf/court/`` or by path) into a validated :class:`Court`."""
     path = court_path(name_or_path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise FormatError(path, f"not valid YAML ({e})") from None
+    data = load_yaml(path, fix="compare with conf/court/padel.yaml")
     if not isinstance(data, dict):
         raise FormatError(path, "expected a mapping at the top level")
     required = ["name", "points", "planes", "materials", "ball"]

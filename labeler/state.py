@@ -580,8 +580,7 @@ class LabelSession:
     @property
     def event_labels(self) -> list[str]:
         """The fine-grained event vocabulary of this clip's court: its surfaces, then the players."""
-        labels = [e for e in self.court.event_labels if e in EVENT_LABELS] + list(PLAYER_EVENTS)
-        return list(dict.fromkeys(labels))
+        return self.court.annotation_labels
 
     def set_event(self, frame: int, label: str | None) -> None:
         """Set (or with ``None`` remove) the event of ``frame``."""
