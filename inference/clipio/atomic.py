@@ -6,6 +6,7 @@ A crash mid-write leaves the old file intact; readers never see a half-written f
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -70,3 +71,17 @@ def remove_stale_temp_files(folder: str | Path, older_than_s: float = STALE_TEMP
         except FileNotFoundError:
             pass
     return removed
+
+
+def backup_file(path: str | Path, folder: str | Path) -> Path:
+    """Copy ``path`` to ``folder/<name>.<timestamp>`` before it is replaced; returns the copy's path."""
+    path, folder = Path(path), Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    dest = folder / f"{path.name}.{stamp}"
+    n = 1
+    while dest.exists():  # two backups of one file within a second
+        dest = folder / f"{path.name}.{stamp}-{n}"
+        n += 1
+    shutil.copy2(path, dest)
+    return dest

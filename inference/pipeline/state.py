@@ -8,11 +8,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
-import time
 from pathlib import Path
 from typing import Any
 
+from inference.clipio import atomic
 from inference.clipio.atomic import atomic_write_text
 from inference.clipio.errors import FormatError
 from inference.clipio.structured import load_json
@@ -43,16 +42,7 @@ def fingerprint(path: Path) -> str | None:
 
 def backup_file(clip_root: Path, path: Path) -> Path:
     """Copy ``path`` into ``<clip>/.rally3d/backup/<name>.<timestamp>`` (before it is replaced); the copy's path."""
-    folder = Path(clip_root) / STATE_DIR / "backup"
-    folder.mkdir(parents=True, exist_ok=True)
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    dest = folder / f"{path.name}.{stamp}"
-    n = 1
-    while dest.exists():  # two backups of one file within a second
-        dest = folder / f"{path.name}.{stamp}-{n}"
-        n += 1
-    shutil.copy2(path, dest)
-    return dest
+    return atomic.backup_file(path, Path(clip_root) / STATE_DIR / "backup")
 
 
 def stage_key(inputs: dict[str, Path | None], params: dict[str, Any]) -> str:
