@@ -297,8 +297,10 @@ def load_court(name_or_path: str | Path) -> Court:
     missing = [k for k in required if k not in data]
     if missing:
         raise FormatError(path, f"missing keys {missing}", fix=f"a court YAML needs {required}")
-    points = {str(n): _vec3(path, f"points.{n}", v) for n, v in data["points"].items()}
     try:
+        if not isinstance(data["points"], dict):
+            raise FormatError(path, "points must be a mapping `name: [x, y, z]`")
+        points = {str(n): _vec3(path, f"points.{n}", v) for n, v in data["points"].items()}
         materials = {str(k): Material(**v) for k, v in data["materials"].items()}
         planes = tuple(
             Plane(
@@ -340,7 +342,8 @@ def load_court(name_or_path: str | Path) -> Court:
             extra={k: v for k, v in data.items()
                    if k not in {*required, "sport", "size", "net_y", "lines", "hits", "event_groups", "players"}},
         )
-    except (KeyError, TypeError, ValueError) as e:
-        if isinstance(e, FormatError):
-            raise
-        raise FormatError(path, f"invalid court definition: {e}") from None
+    except FormatError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError) as e:
+        raise FormatError(path, f"invalid court definition: {type(e).__name__}: {e}",
+                          fix="compare with conf/court/padel.yaml") from None

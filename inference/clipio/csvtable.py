@@ -95,6 +95,7 @@ class CsvTable:
         header = _match_header(path, header, columns, optional, ignore_case, header_line)
         rows = [row for _, row in records[1:]]
         lines = [line for line, _ in records[1:]]
+        header, rows = _drop_unnamed_columns(path, header, rows, header_line)
         table = cls(path, header, rows, lines)
         table._check_field_counts(skipped)
         if not rows and not allow_empty:
@@ -262,6 +263,21 @@ def parse_rows(table: CsvTable, parse: Callable[[CsvTable], T], skipped: list[Fo
             except KeyError:
                 raise err from None
             skipped.append(err)
+
+
+def _drop_unnamed_columns(
+    path: Path, header: list[str], rows: list[list[str]], line: int
+) -> tuple[list[str], list[list[str]]]:
+    """Drop columns without a name (a trailing comma, as spreadsheets write) when they hold nothing."""
+    unnamed = [i for i, name in enumerate(header) if name == ""]
+    if not unnamed:
+        return header, rows
+    for row in rows:
+        if any(i < len(row) and row[i].strip() for i in unnamed):
+            raise FormatError(path, f"column {unnamed[0] + 1} has no name but holds values", line=line,
+                              fix="give every column a name in the header")
+    keep = [i for i in range(len(header)) if i not in unnamed]
+    return [header[i] for i in keep], [[row[i] for i in keep if i < len(row)] + row[len(header):] for row in rows]
 
 
 def _match_header(
