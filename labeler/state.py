@@ -224,6 +224,7 @@ class LabelSession:
         self.ball_proposals: dict[int, tuple[int, float, float]] = {}
         self.ball_proposal_source: str = ""
         self.event_proposals: dict[int, str] = {}
+        self.ball_scores: dict[int, float] = {}  # frame → the detector's confidence (0..1) of its proposal
         self.interpolation_skipped: list[tuple[int, int, str]] = []  # (keyframe, keyframe, why) of the last run
         self.notices: list[str] = []
         self.calibration = None  # inference.calibration.CalibrationResult of the current points
@@ -609,10 +610,16 @@ class LabelSession:
         err_a, err_b = pa - ends[0], pb - ends[1]
         return fit + err_a[None] + ((t - a) / (b - a))[:, None] * (err_b - err_a)[None]
 
-    def set_ball_proposals(self, track: BallTrack, source: str) -> int:
-        """Show a model's track (e.g. the ball detector's) as proposals; returns how many frames it covers."""
+    def set_ball_proposals(self, track: BallTrack, source: str, scores: np.ndarray | None = None) -> int:
+        """Show a model's track (e.g. the ball detector's) as proposals; returns how many frames it covers.
+
+        ``scores``: ``(n_frames,)`` the model's confidence in ``[0, 1]`` per frame (0 where it found nothing);
+        it colours the proposals and drives :meth:`next_uncertain`.
+        """
         self.ball_proposals = _ball_dict(track)
         self.ball_proposals = {f: r for f, r in self.ball_proposals.items() if 0 <= f < self.n_frames}
+        self.ball_scores = {} if scores is None else {
+            f: float(v) for f, v in enumerate(np.clip(np.asarray(scores, float), 0, 1)[: self.n_frames])}
         self.ball_proposal_source = source
         self._notify()
         return len(self.ball_proposals)
@@ -635,6 +642,17 @@ class LabelSession:
         """
         lo, hi = self.flight(self._check_frame(frame))
         return self.accept_ball_proposals(range(lo, hi + 1)), (lo, hi)
+
+    def next_uncertain(self, frame: int, threshold: float = 0.5) -> int | None:
+        """The next frame after ``frame`` (wrapping) that is not labelled and where the detector was unsure:
+        its confidence is below ``threshold`` (0 where it found no ball). None without detector scores."""
+        if not self.ball_scores:
+            return None
+        for k in range(1, self.n_frames + 1):
+            f = (frame + k) % self.n_frames
+            if f not in self.ball and self.ball_scores.get(f, 0.0) < threshold:
+                return f
+        return None
 
     def reject_ball_proposals(self, frames: Iterable[int] | None = None) -> int:
         """Drop proposals (all, or those at ``frames``)."""
@@ -742,6 +760,54 @@ class LabelSession:
 
     def remove_point(self, name: str) -> None:
         self.apply(f"remove court point {name}", [self._change("points", name, None)])
+
+    def expected_points_px(self) -> dict[str, np.ndarray]:
+        """Where the court points should be in the image, in pixels, as far as the clicks so far tell.
+
+        Through the live calibration when there is one; else, from 4 clicked floor points on, through the
+        floor's homography (floor points only). Points that cannot be placed yet are left out.
+        """
+        court = self.court
+        if self.calibration is not None:
+            cam = self.calibration.camera
+            names = court.point_names
+            px = cam.project(court.point_array(names))
+            return {n: p for n, p in zip(names, px) if np.isfinite(p).all()}
+        ground = [n for n in self.points if abs(court.points[n][2]) < 1e-6]
+        if len(ground) < 4:
+            return {}
+        import cv2
+
+        src = np.array([court.points[n][:2] for n in ground], np.float64)
+        dst = np.array([self.points[n] for n in ground], np.float64) * [self.width, self.height]
+        H, _ = cv2.findHomography(src, dst, 0)
+        if H is None:
+            return {}
+        out = {}
+        for n in court.point_names:
+            x, y, z = court.points[n]
+            if abs(z) < 1e-6:
+                q = H @ np.array([x, y, 1.0])
+                if q[2] > 1e-9:
+                    out[n] = q[:2] / q[2]
+        return out
+
+    def next_point(self, after: str | None = None, view_px: tuple[float, float, float, float] | None = None,
+                   ) -> str | None:
+        """The court point to click next: the first unplaced one (in the court's order, after ``after``)
+        that is expected inside ``view_px`` = ``(x0, y0, x1, y1)`` (default the whole image); points whose
+        place is not known yet come next, then the rest. None when every point is placed."""
+        names = self.court.point_names
+        start = names.index(after) + 1 if after in names else 0
+        order = [n for n in names[start:] + names[:start] if n not in self.points]
+        if not order:
+            return None
+        x0, y0, x1, y1 = view_px or (0.0, 0.0, float(self.width), float(self.height))
+        x0, y0, x1, y1 = max(x0, 0.0), max(y0, 0.0), min(x1, self.width), min(y1, self.height)
+        expected = self.expected_points_px()
+        inside = [n for n in order if n in expected and x0 <= expected[n][0] <= x1 and y0 <= expected[n][1] <= y1]
+        unknown = [n for n in order if n not in expected]
+        return (inside or unknown or order)[0]
 
     def _recalibrate(self, *, write: bool) -> None:
         """Calibrate from the current points; write camera.yaml on success (when ``write``)."""
