@@ -191,6 +191,11 @@ class CsvTable:
             lambda i: f"{column} is not an integer: {values[i]:g}",
             fix=f"write a whole number in column {column}",
         )
+        self.check(
+            np.abs(values) > 2**53,
+            lambda i: f"{column} is too large: {values[i]:g}",
+            fix=f"write a whole number below 2^53 in column {column}",
+        )
         return values.astype(np.int64)
 
     def choices(self, column: str, allowed: Sequence[str]) -> np.ndarray:

@@ -109,6 +109,7 @@ CSV_READERS = {
 }
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # a silent overflow or bad cast is a bug too
 @pytest.mark.parametrize("name", list(CSV_READERS))
 def test_csv_readers_raise_only_format_errors(name, tmp_path):
     read, header = CSV_READERS[name]
