@@ -2,9 +2,10 @@
 
 Stepping by replacing one image's JPEG makes the browser decode and upload it after the key press (≈0.5 s
 with software WebGL), so the status line runs ahead of the picture. Here ``slots`` image planes share the
-frame's place: the shown frame's plane at z = 0, the prefetched frames' planes a hair behind it, where the
-browser draws them (so it has decoded and uploaded them) but the front plane hides them. Showing a
-prefetched frame only moves two planes. Every frame carries its number burned into the picture
+frame's place: the shown frame's plane at z = 0, the prefetched frames' planes a hair behind it and shrunk to
+a speck (:data:`BACK_SCALE`), where the browser draws them (so it has decoded and uploaded their textures)
+but the front plane hides them and they cost almost no fill (software WebGL pays per pixel drawn). Showing
+a prefetched frame only moves and scales two planes. Every frame carries its number burned into the picture
 (:func:`labeler.frames.stamp_frame_number`), so the number on screen always belongs to the image shown.
 """
 from __future__ import annotations
@@ -18,6 +19,8 @@ from .viewer_common import ImagePlane, set_image_jpeg
 
 BACK_Z = 0.0005
 """Scene depth between stacked planes (the overlays lie at z < 0, in front of every plane)."""
+BACK_SCALE = 0.02
+"""Scale of the planes behind the shown one: drawn (texture uploaded), but a few pixels on screen."""
 
 
 class FrameStack:
@@ -39,7 +42,7 @@ class FrameStack:
         for i in range(self.slots):
             node = scene.add_image(f"/frames/{i}", np.zeros((8, 8, 3), np.uint8), render_width=plane.render_width,
                                    render_height=plane.render_height, format="jpeg",
-                                   position=(0.0, 0.0, BACK_Z * (i + 1)))
+                                   position=(0.0, 0.0, BACK_Z * (i + 1)), scale=BACK_SCALE)
             node.on_click(self._click)
             node.on_drag("left")(lambda ev: None)  # a left-drag on the frame must not orbit the camera
             self.nodes.append(node)
@@ -86,7 +89,9 @@ class FrameStack:
         if i != self.front:
             if self.front >= 0:
                 self.nodes[self.front].position = (0.0, 0.0, BACK_Z * (self.front + 1))
+                self.nodes[self.front].scale = BACK_SCALE
             self.nodes[i].position = (0.0, 0.0, 0.0)
+            self.nodes[i].scale = 1.0
             self.front = i
 
     def preload(self, frames: Iterable[int], jpeg: Callable[[int], bytes | None]) -> list[int]:
