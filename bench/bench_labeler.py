@@ -80,22 +80,28 @@ ON_SCREEN_JS = """
   const probe = document.createElement("canvas");
   probe.width = Math.max(1, Math.round(region.w)); probe.height = Math.max(1, Math.round(region.h));
   const ctx = probe.getContext("2d", {willReadFrequently: true});
-  const hash = () => {
+  const read = () => {
     ctx.drawImage(src, region.x, region.y, region.w, region.h, 0, 0, probe.width, probe.height);
-    const d = ctx.getImageData(0, 0, probe.width, probe.height).data;
-    let h = 0, sum = 0;
-    for (let i = 0; i < d.length; i += 1) { h = (Math.imul(h, 31) + d[i]) | 0; sum += d[i]; }
-    return sum === 0 ? null : h;  // an all-zero read: the drawing buffer was not available, no sample
+    return ctx.getImageData(0, 0, probe.width, probe.height).data;
+  };
+  // a new picture: at least 12 pixels of the number box changed by more than 60 levels (the renderer's
+  // fade-in after each redraw moves every pixel by a level or two, and is not a new picture)
+  const changed = (a, b) => {
+    let n = 0;
+    for (let i = 0; i < a.length; i += 4) {
+      if (Math.abs(a[i] - b[i]) + Math.abs(a[i + 1] - b[i + 1]) + Math.abs(a[i + 2] - b[i + 2]) > 60) n += 1;
+    }
+    return n >= 12;
   };
   const r = window.__r3d = {armed: false, key: null, image: null, status: null, before: null, expect: ""};
   r.arm = (expect) => { r.key = r.image = r.status = r.before = null; r.expect = expect; r.armed = true; };
   document.addEventListener("keydown", (ev) => { if (r.armed && r.key === null) r.key = ev.timeStamp; }, true);
   const tick = () => {
-    if (r.armed && r.key === null && r.before === null) r.before = hash();  // the old picture, read back
+    if (r.armed && r.key === null && r.before === null) r.before = read().slice();  // the old picture
     if (r.armed && r.key !== null && r.before !== null) {
       const now = performance.now();
       if (r.status === null && document.body.textContent.includes(r.expect)) r.status = now;
-      if (r.image === null) { const h = hash(); if (h !== null && h !== r.before) r.image = now; }
+      if (r.image === null && changed(read(), r.before)) r.image = now;
       if (r.status !== null && r.image !== null) r.armed = false;
     }
     requestAnimationFrame(tick);
