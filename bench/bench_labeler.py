@@ -114,6 +114,17 @@ animation frame whose pixels in the frame-number box of the picture differ from 
 image on screen (the three.js canvas read back every animation frame)."""
 
 
+def wait_for(fn, what: str, timeout_s: float = 180.0):
+    """``fn()``'s first truthy value, polled; a clear error naming ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = fn()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise TimeoutError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
 def browser_steps(clip_dir: Path, steps: int, chromium: str, slots: int, dwell_s: float) -> tuple[list, list]:
     """Step ``steps`` times with the hotkey L in headless Chromium; (status-line, image-on-screen) seconds.
 
@@ -135,12 +146,8 @@ def browser_steps(clip_dir: Path, steps: int, chromium: str, slots: int, dwell_s
             page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(f"http://127.0.0.1:{port}/?fixedDpr=1", wait_until="load")
             page.wait_for_selector(CANVAS, timeout=60_000)
-            deadline = time.monotonic() + 60
-            while not app.views and time.monotonic() < deadline:
-                time.sleep(0.05)
-            view = next(iter(app.views.values()))
-            while view.shown < 0 or not view.camera_fitted:
-                time.sleep(0.05)
+            view = wait_for(lambda: next(iter(app.views.values()), None), "the labeler view")
+            wait_for(lambda: view.shown >= 0 and view.camera_fitted, "the first frame and the fitted camera")
             time.sleep(1.5)
             box = page.locator(CANVAS).bounding_box()
             w = view.plane.width
@@ -156,6 +163,8 @@ def browser_steps(clip_dir: Path, steps: int, chromium: str, slots: int, dwell_s
                 key, st, im = page.evaluate("[window.__r3d.key, window.__r3d.status, window.__r3d.image]")
                 status.append((st - key) / 1000)
                 image.append((im - key) / 1000)
+                print(f"\r  {slots} plane(s): step {i}/{steps}", end="", file=sys.stderr, flush=True)
+            print(file=sys.stderr)
             browser.close()
     finally:
         app.stop()
