@@ -21,6 +21,7 @@ import yaml
 
 from inference.clipio.atomic import atomic_write_text
 from inference.clipio.errors import FormatError
+from inference.clipio.structured import load_yaml
 
 
 def decompose_projection(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -200,10 +201,7 @@ class Camera:
         path = Path(path)
         if not path.is_file():
             raise FormatError(path, "camera file not found", fix="run `rally3d calibrate <clip>` first")
-        try:
-            d = yaml.safe_load(path.read_text())
-        except yaml.YAMLError as e:
-            raise FormatError(path, f"not valid YAML ({e})") from None
+        d = load_yaml(path, fix="re-run `rally3d calibrate <clip>`")
         if not isinstance(d, dict) or "P" not in d or "image_size" not in d:
             raise FormatError(path, "needs the keys `image_size: [W, H]` and `P` (3×4)")
         try:

@@ -155,13 +155,49 @@ def run_courts(args: argparse.Namespace) -> int:
 def check(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("check", help="validate every file of a clip folder",
                        description="Reads each file of the clip folder that exists and reports problems "
-                       "with file, line and fix. Exit code 1 if any file is invalid.")
+                       "with file, line and fix: opens the video and decodes its first and last frames "
+                       "(every frame with --full), checks that the video and camera.yaml have clip.yaml's "
+                       "frame size, and that events.csv uses the court's event labels. Exit code 1 if any "
+                       "file is invalid.")
     p.add_argument("clips", type=Path, nargs="+", help="clip folders")
+    p.add_argument("--full", action="store_true", help="decode every frame of the video (slow on long videos)")
     p.set_defaults(func=run_check)
+
+
+def check_video(clip, full: bool = False) -> str:
+    """Open ``clip``'s video and decode its first and last frames (every frame with ``full``).
+
+    Returns a one-line summary; raises :class:`FormatError` (file, problem, fix) for a video that is
+    missing, empty, truncated, undecodable or of another size than clip.yaml says.
+    """
+    from inference.clipio.errors import FormatError
+    from inference.clipio.frames import VIDEO_FIX
+
+    info = clip.info
+    path = clip.video_path
+    if path.is_file() and path.stat().st_size == 0:
+        raise FormatError(path, "the video file is empty (0 bytes)", fix=VIDEO_FIX)
+    with clip.frames(cache_size=1) as src:
+        n = len(src)
+        if n <= 0:
+            raise FormatError(path, "the video has no frames", fix=VIDEO_FIX)
+        if (src.width, src.height) != (info.width, info.height):
+            raise FormatError(path, f"the video is {src.width}×{src.height} but clip.yaml says "
+                              f"{info.width}×{info.height}", fix="correct width/height in clip.yaml")
+        if full:
+            decoded = sum(1 for _ in src.iter())
+        else:
+            src.read(n - 1)  # a truncated file fails here (its index still counts the lost frames)
+            decoded = 2 if n > 1 else 1
+        if info.n_frames is not None and info.n_frames > n:
+            raise FormatError(clip.clip_yaml_path, f"n_frames is {info.n_frames} but the video has {n} frames",
+                              fix=f"set n_frames: {n} (or leave it out)")
+    return f"{n} frames, {decoded} decoded"
 
 
 def run_check(args: argparse.Namespace) -> int:
     from inference.clipio import Clip
+    from inference.clipio.atomic import stale_temp_files
     from inference.clipio.errors import FormatError
 
     bad = 0
@@ -170,25 +206,38 @@ def run_check(args: argparse.Namespace) -> int:
         try:
             info = clip.info
             court = _clip_court(clip)
-            n_frames = clip.n_frames
         except (FormatError, FileNotFoundError) as e:
             print(f"FAIL {root}: {e}")
             bad += 1
             continue
+        print(f"{root}: {info.sport}, {info.width}x{info.height} @ {info.fps:g} fps")
+        try:
+            print(f"  ok   {info.video} {check_video(clip, args.full)}")
+            n_frames = clip.n_frames
+        except FormatError as e:
+            print(f"  FAIL {e}")
+            bad += 1
+            n_frames = info.n_frames
+
+        def camera(gt: bool = False):
+            cam = clip.read_camera(gt=gt)
+            clip.check_camera(cam, clip.root / ("gt" if gt else "") / "camera.yaml")
+            return cam
+
+        labels = court.annotation_labels
         checks = {
             "ball.csv": lambda: clip.read_ball(n_frames=n_frames),
             "inactive_balls.csv": lambda: clip.read_inactive_balls(n_frames=n_frames),
-            "events.csv": lambda: clip.read_events(n_frames=n_frames),
+            "events.csv": lambda: clip.read_events(n_frames=n_frames, labels=labels),
             "court_points.csv": lambda: clip.read_court_points(known_names=court.point_names),
-            "camera.yaml": clip.read_camera,
+            "camera.yaml": camera,
             "ball_3d.csv": lambda: clip.read_ball_3d(n_frames=n_frames),
             "players.csv": lambda: clip.read_players(n_frames=n_frames),
-            "gt/camera.yaml": lambda: clip.read_camera(gt=True),
+            "gt/camera.yaml": lambda: camera(gt=True),
             "gt/ball_3d.csv": lambda: clip.read_ball_3d(gt=True, n_frames=n_frames),
-            "gt/events.csv": lambda: clip.read_events(gt=True, n_frames=n_frames),
+            "gt/events.csv": lambda: clip.read_events(gt=True, n_frames=n_frames, labels=labels),
             "gt/players.csv": lambda: clip.read_players(gt=True, n_frames=n_frames),
         }
-        print(f"{root}: {info.sport}, {info.width}x{info.height} @ {info.fps:g} fps, {n_frames} frames")
         for name, read in checks.items():
             if not (clip.root / name).is_file():
                 continue
@@ -199,4 +248,6 @@ def run_check(args: argparse.Namespace) -> int:
             except FormatError as e:
                 print(f"  FAIL {e}")
                 bad += 1
+        for tmp in stale_temp_files(clip.root):
+            print(f"  note {tmp.name}: left by a save that did not finish (the labeler removes it at start)")
     return 1 if bad else 0

@@ -19,9 +19,9 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from inference.clipio.errors import FormatError
+from inference.clipio.structured import load_yaml
 
 #: Where the court YAML files live: ``$RALLY3D_CONF/court`` or the repository's ``conf/court``.
 CONF_DIR = Path(os.environ.get("RALLY3D_CONF", Path(__file__).resolve().parent.parent / "conf"))
@@ -251,6 +251,14 @@ class Court:
         """The distinct surface-contact labels of this court, in plane order."""
         return list(dict.fromkeys(p.event for p in self.planes))
 
+    @property
+    def annotation_labels(self) -> list[str]:
+        """The labels an ``events.csv`` of this court may hold: its surfaces, then the two player hits."""
+        from inference.clipio.tables import EVENT_LABELS
+
+        surfaces = [e for e in self.event_labels if e in EVENT_LABELS]
+        return list(dict.fromkeys([*surfaces, "player_near", "player_far"]))
+
     def off_ground_points(self, tol: float = 1e-6) -> list[str]:
         """Names of points with z ≠ 0 (needed to calibrate a camera)."""
         return [n for n, p in self.points.items() if abs(p[2]) > tol]
@@ -283,18 +291,17 @@ def _vec3(path: Path, where: str, value) -> np.ndarray:
 def load_court(name_or_path: str | Path) -> Court:
     """Load a court YAML (by name under ``conf/court/`` or by path) into a validated :class:`Court`."""
     path = court_path(name_or_path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise FormatError(path, f"not valid YAML ({e})") from None
+    data = load_yaml(path, fix="compare with conf/court/padel.yaml")
     if not isinstance(data, dict):
         raise FormatError(path, "expected a mapping at the top level")
     required = ["name", "points", "planes", "materials", "ball"]
     missing = [k for k in required if k not in data]
     if missing:
         raise FormatError(path, f"missing keys {missing}", fix=f"a court YAML needs {required}")
-    points = {str(n): _vec3(path, f"points.{n}", v) for n, v in data["points"].items()}
     try:
+        if not isinstance(data["points"], dict):
+            raise FormatError(path, "points must be a mapping `name: [x, y, z]`")
+        points = {str(n): _vec3(path, f"points.{n}", v) for n, v in data["points"].items()}
         materials = {str(k): Material(**v) for k, v in data["materials"].items()}
         planes = tuple(
             Plane(
@@ -336,7 +343,8 @@ def load_court(name_or_path: str | Path) -> Court:
             extra={k: v for k, v in data.items()
                    if k not in {*required, "sport", "size", "net_y", "lines", "hits", "event_groups", "players"}},
         )
-    except (KeyError, TypeError, ValueError) as e:
-        if isinstance(e, FormatError):
-            raise
-        raise FormatError(path, f"invalid court definition: {e}") from None
+    except FormatError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, ArithmeticError) as e:
+        raise FormatError(path, f"invalid court definition: {type(e).__name__}: {e}",
+                          fix="compare with conf/court/padel.yaml") from None

@@ -13,9 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.clipio import Clip
+from inference.clipio import Clip, FormatError
 
+from .client_js import SHORTCUTS_BUTTON, install_keyboard
 from .frames import FrameCache
+from .framestack import FrameStack
 from .panels.assist import populate_assist
 from .panels.ball import populate_ball
 from .panels.court import populate_court
@@ -24,9 +26,11 @@ from .panels.navigation import MODES, populate_navigation
 from .panels.stationary import populate_stationary
 from .render import Overlay
 from .state import VISIBILITY_NAMES, LabelSession, clip_overview, find_clips
-from .viewer_common import ImagePlane, fit_camera, set_image_jpeg, set_slider_marks, setup_server
+from .viewer_common import ImagePlane, fit_camera, md_escape, set_slider_marks, setup_server
 
 MAX_KEYFRAME_MARKS = 40
+FRAME_SLOTS = 10
+"""Image planes per tab: the shown frame and the next ones already decoded by the browser (see framestack)."""
 
 # (label, hotkey, modifier, action name, argument): the keys avoid W/A/S/D/Q/E and the arrows (camera keys)
 HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
@@ -46,7 +50,11 @@ HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
     ("clear ball", "backspace", None, "clear_ball", None),
     ("interpolate keyframes", "I", None, "interpolate", None),
     ("accept proposal here", "Y", None, "accept_here", None),
-    ("accept all proposals", "Y", "shift", "accept_range", None),
+    ("accept the proposals of this flight (stops at events)", "Y", "shift", "accept_flight", None),
+    ("next uncertain frame (detector)", "U", None, "next_uncertain", None),
+    ("accept the proposed event here", "V", None, "accept_event_here", None),
+    ("next proposed event", "P", None, "jump_proposed_event", None),
+    ("follow the ball (zoom)", "G", None, "toggle_follow", None),
     ("cycle mode (ball / stationary / court)", "M", None, "cycle_mode", None),
     ("fit view", "F", None, "fit", None),
     ("undo", "Z", "cmd/ctrl", "undo", None),
@@ -58,10 +66,10 @@ HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
 class ClientView:
     """One browser tab on one clip: its session, GUI, frame plane, overlays and render thread."""
 
-    def __init__(self, app: LabelerApp, client, clip: Clip):
+    def __init__(self, app: LabelerApp, client, clip: Clip, session: LabelSession | None = None):
         self.app, self.client, self.clip = app, client, clip
         self.lock = threading.RLock()
-        self.session = LabelSession(clip)
+        self.session = session if session is not None else LabelSession(clip)
         s = self.session
         self.plane = ImagePlane(s.width, s.height)
         self.frames = app.frame_cache(clip)
@@ -69,24 +77,22 @@ class ClientView:
         self.pending_visibility = 1
         self.target, self.shown, self.direction = 0, -1, 1
         self.playing, self.speed = False, 1.0
+        self.follow = False
         self.fit_distance: float | None = None
         self.reported_camera: np.ndarray | None = None  # the browser's last reported camera position (3,)
         self._aspect = 0.0
         self._fit_lock = threading.RLock()
         self._fit_pending = True
         self._overlay_dirty = self._gui_dirty = True
+        self._preload_missing: list[int] = []
         self._closed = False
         self._cond = threading.Condition()
         self.step_times: list[float] = []  # seconds from a step request to its frame sent (for the bench)
         self._requested_at: dict[int, float] = {}
         self._detector_thread: threading.Thread | None = None
+        self._shortcuts = None
 
-        first = self.frames.get(0)
-        self.image = client.scene.add_image("/frame", np.zeros((8, 8, 3), np.uint8), render_width=self.plane.render_width,
-                                            render_height=self.plane.render_height, format="jpeg")
-        set_image_jpeg(self.image, first)
-        self.image.on_click(self._on_click)
-        self.image.on_drag("left")(lambda ev: None)  # a left-drag on the frame must not orbit the camera
+        self.stack = FrameStack(client.scene, self.plane, app.frame_slots, self._on_click)
         self.overlay = Overlay(client.scene, self.plane)
 
         gui = client.gui
@@ -119,7 +125,7 @@ class ClientView:
             self._cond.notify_all()
         with warnings.catch_warnings():  # a disconnected client's handles are already gone
             warnings.simplefilter("ignore")
-            for handle in (self.folder, self.image, *self.overlay.handles()):
+            for handle in (self.folder, *self.stack.handles(), *self.overlay.handles()):
                 try:
                     handle.remove()
                 except Exception:
@@ -157,6 +163,30 @@ class ClientView:
         f = self.session.next_event(self.target, direction)
         if f is not None:
             self.goto(f)
+
+    def next_uncertain(self) -> None:
+        f = self.session.next_uncertain(self.target)
+        if f is None:
+            self._notice("no uncertain frame: run the ball detector (Assist tab) first" if not self.session.ball_scores
+                         else "no unlabelled frame where the detector is unsure")
+        else:
+            self.goto(f)
+
+    def jump_proposed_event(self) -> None:
+        later = sorted(f for f in self.session.event_proposals if f > self.target)
+        frames = later or sorted(self.session.event_proposals)
+        if frames:
+            self.goto(frames[0])
+        else:
+            self._notice("no proposed events: use 'propose events' in the Assist tab")
+
+    def toggle_follow(self) -> None:
+        self.follow = not self.follow
+        if self.ball_panel.follow.value != self.follow:
+            self.ball_panel.follow.value = self.follow
+        if not self.follow:
+            self.fit()
+        self.request(overlay=True)
 
     def set_playing(self, playing: bool) -> None:
         self.playing = playing
@@ -201,6 +231,32 @@ class ClientView:
             self.fit_distance = fit_camera(self.client, self.plane, aspect=aspect)
             self._aspect = float(aspect)
             self._fit_pending = True
+
+    def view_px(self) -> tuple[float, float, float, float] | None:
+        """The part of the image the browser shows now, ``(x0, y0, x1, y1)`` pixels (None before a report)."""
+        cam = self.reported_camera
+        if cam is None or cam[2] >= 0 or not self._aspect:
+            return None
+        half_h = -cam[2] * np.tan(np.radians(50.0) / 2)
+        half_w = half_h * self._aspect
+        lo = self.plane.scene_to_pixel([[cam[0] - half_w, cam[1] - half_h]])[0]
+        hi = self.plane.scene_to_pixel([[cam[0] + half_w, cam[1] + half_h]])[0]
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+    def _follow_ball(self, frame: int) -> None:
+        """Centre the view on the ball of ``frame`` (labelled, else proposed, else the last labelled before)."""
+        s = self.session
+        row = s.ball.get(frame) or s.ball_proposals.get(frame)
+        if row is None or row[0] == 0:
+            before = [f for f in s.keyframes() if f <= frame]
+            row = s.ball[before[-1]] if before else None
+        if row is None or not self.fit_distance:
+            return
+        c = self.plane.pixel_to_scene([[row[1] * s.width, row[2] * s.height]])[0]
+        d = self.fit_distance / max(float(self.ball_panel.zoom.value), 1.0)
+        with self._fit_lock, self.client.atomic():
+            self.client.camera.position = (c[0], c[1], -d)
+            self.client.camera.look_at = (c[0], c[1], 0.0)
 
     @property
     def camera_fitted(self) -> bool:
@@ -277,6 +333,7 @@ class ClientView:
             nxt = self.next_court_point(after=name)
             if nxt is not None:
                 self.court_panel.point.value = nxt
+                self._notice(f"placed {name}; next: {nxt} (in view)")
 
     def set_visibility(self, visibility: int) -> None:
         if not self._edit(self.session.set_visibility, self.frame, visibility) and visibility in (2, 3):
@@ -287,11 +344,24 @@ class ClientView:
         self._edit(self.session.clear_ball, self.frame)
 
     def interpolate(self) -> None:
-        n = self._edit(self.session.interpolate, str(self.ball_panel.method.value))
-        self._notice(f"{n or 0} provisional position(s) from keyframe interpolation: accept with Y / shift+Y")
+        s = self.session
+        n = self._edit(s.interpolate, str(self.ball_panel.method.value), max_gap=int(self.ball_panel.max_gap.value))
+        text = f"{n or 0} proposed position(s) between keyframes: Y accepts one, shift+Y this flight"
+        if s.interpolation_skipped:
+            gaps = ", ".join(f"{a}–{b} ({why})" for a, b, why in s.interpolation_skipped[:3])
+            text += f"; not filled: {gaps}" + (" …" if len(s.interpolation_skipped) > 3 else "")
+        self._notice(text)
 
     def accept_here(self) -> None:
-        self._edit(self.session.accept_ball_proposals, [self.frame], overwrite=True)
+        n = self._edit(self.session.accept_ball_proposals, [self.frame], overwrite=True)
+        if not n:
+            self._notice("no proposal on this frame")
+
+    def accept_flight(self) -> None:
+        res = self._edit(self.session.accept_flight_proposals, self.frame)
+        if res is not None:
+            n, (lo, hi) = res
+            self._notice(f"accepted {n} proposal(s) of the flight {lo}–{hi} (stops at its events)")
 
     def accept_range(self, start: int | None = None, stop: int | None = None, *, overwrite: bool = False) -> None:
         frames = None if start is None else range(start, (stop if stop is not None else start) + 1)
@@ -315,20 +385,38 @@ class ClientView:
         self._edit(self.session.remove_point, name)
 
     def next_court_point(self, after: str | None = None) -> str | None:
-        names = self.session.court.point_names
-        start = names.index(after) + 1 if after in names else 0
-        for name in names[start:] + names[:start]:
-            if name not in self.session.points:
-                return name
-        return None
+        """The next unplaced court point, preferring one expected inside the part of the image in view."""
+        return self.session.next_point(after, self.view_px())
+
+    def show_shortcuts(self) -> None:
+        """Open the cheat-sheet (hotkey ``?``): every key, with this court's event names."""
+        if self._shortcuts is not None:
+            try:
+                self._shortcuts.close()
+            except Exception:
+                pass
+        with self.client.gui.add_modal("Shortcuts") as modal:
+            self.client.gui.add_markdown(shortcuts_markdown(self.session.event_labels))
+            self.client.gui.add_button("close").on_click(lambda ev: modal.close())
+        self._shortcuts = modal
 
     def undo(self) -> None:
         edit = self._edit(self.session.undo)
-        self._notice(f"undid: {edit.label}" if edit else "nothing to undo")
+        if edit is None:
+            self._notice("nothing to undo")
+        elif edit.changes:
+            self._notice(f"undid: {edit.label}")
+        else:
+            self.request(gui=True)  # the session's notice says whose rows were left
 
     def redo(self) -> None:
         edit = self._edit(self.session.redo)
-        self._notice(f"redid: {edit.label}" if edit else "nothing to redo")
+        if edit is None:
+            self._notice("nothing to redo")
+        elif edit.changes:
+            self._notice(f"redid: {edit.label}")
+        else:
+            self.request(gui=True)
 
     # ------------------------------------------------------------------------ model assistance
     def run_detector(self, weights: str | None) -> None:
@@ -350,14 +438,14 @@ class ClientView:
             info.content = f"detector: frame {done} / {total}"
 
         try:
-            track, text = run_ball_detector(self.clip, weights, progress)
+            track, scores, text = run_ball_detector(self.clip, weights, progress)
         except Exception as e:  # shown in the GUI: a bad checkpoint must not kill the labeler
-            info.content = f"⚠ detector failed: {e}"
+            info.content = f"⚠ detector failed: {md_escape(e)}"
             bar.visible = False
             return
         with self.lock:
-            self.session.set_ball_proposals(track, "ball detector")
-        info.content = text
+            self.session.set_ball_proposals(track, "ball detector", scores)
+        info.content = md_escape(text)
         bar.value, bar.visible = 100.0, False
 
     def propose_events(self) -> None:
@@ -368,21 +456,30 @@ class ClientView:
             try:
                 events = propose_events(self.session)
             except RuntimeError as e:
-                info.content = str(e)
+                info.content = md_escape(e)
                 return
             n = self.session.set_event_proposals(events)
-        info.content = f"{n} proposed event(s): accept them with 'accept events'"
+        info.content = f"{n} proposed event(s): P jumps to the next, V accepts the one on this frame"
+        self.request(overlay=True, gui=True)
 
     def accept_events(self) -> None:
         n = self._edit(self.session.accept_event_proposals)
         self._notice(f"accepted {n or 0} event proposal(s)")
+
+    def accept_event_here(self) -> None:
+        label = self.session.event_proposals.get(self.frame)
+        if label is None:
+            self._notice("no proposed event on this frame (P jumps to the next)")
+            return
+        n = self._edit(self.session.accept_event_proposals, [self.frame], overwrite=True)
+        self._notice(f"accepted the proposed event {label} @{self.frame}" if n else "event not accepted")
 
     # ------------------------------------------------------------------------------- rendering
     def _render_loop(self) -> None:
         while True:
             with self._cond:
                 if not self._closed and self.target == self.shown and not (self._overlay_dirty or self._gui_dirty):
-                    self._cond.wait(timeout=1.0)
+                    self._cond.wait(timeout=0.1 if self._preload_missing else 1.0)
                 if self._closed:
                     return
                 idle = self.target == self.shown and not (self._overlay_dirty or self._gui_dirty)
@@ -392,6 +489,7 @@ class ClientView:
                     requested = self._requested_at.pop(frame, None)
                     self._requested_at.clear()
             if idle:  # outside the condition: syncing takes the session lock (lock order: session, then cond)
+                self._preload()
                 self._sync_from_disk()
                 continue
             try:
@@ -402,6 +500,13 @@ class ClientView:
             if requested is not None:
                 self.step_times.append(time.perf_counter() - requested)
 
+    def _preload(self) -> None:
+        """Send the frames around the shown one that the cache has decoded meanwhile to the planes behind."""
+        if not self._preload_missing or self.stack.slots < 2:
+            return
+        with self.lock, self.client.atomic():
+            self._preload_missing = self.stack.preload(self._preload_missing, self.frames.peek)
+
     def _sync_from_disk(self) -> None:
         with self.lock:
             try:
@@ -409,17 +514,26 @@ class ClientView:
             except Exception as e:
                 self.session.notices.append(f"⚠ could not re-read the clip files: {e}")
 
+    def _wanted(self, frame: int, direction: int) -> list[int]:
+        """Frames to hold in the browser after ``frame``: ahead in the stepping direction first, then one behind."""
+        n, k = self.session.n_frames, self.stack.slots - 1
+        ahead = [frame + direction * i for i in range(1, max(k - 1, 1) + 1)]
+        return [f for f in [*ahead, frame - direction] if 0 <= f < n][:k]
+
     def _render(self, frame: int, direction: int) -> None:
-        data = self.frames.get(frame) if frame != self.shown else None
         with self.lock, self.client.atomic():
-            if data is not None:
-                set_image_jpeg(self.image, data)
+            if frame != self.shown:
+                self.stack.show(frame, self.frames.get)
+            if self.stack.slots > 1:
+                self._preload_missing = self.stack.preload(self._wanted(frame, direction), self.frames.peek)
             self.overlay.draw(self.session, frame, mode=self.mode, trail_length=int(self.ball_panel.trail.value),
                               show_court=bool(self.court_panel.show.value) or self.mode == "court",
                               selected_point=str(self.court_panel.point.value) if self.mode == "court" else None)
             self._refresh_gui(frame)
         self.shown = frame
         self.client.flush()
+        if self.follow:
+            self._follow_ball(frame)
         self.frames.prefetch(frame, direction)
 
     def _refresh_gui(self, frame: int) -> None:
@@ -433,13 +547,16 @@ class ClientView:
         if row is not None and row[0] > 0:
             ball += f" ({row[1] * s.width:.1f}, {row[2] * s.height:.1f}) px"
         event = s.events.get(frame, "–")
+        proposed = s.event_proposals.get(frame)
+        if proposed is not None and proposed != s.events.get(frame):
+            event += f" · proposed: {proposed} (V accepts)"
         nav.status.content = (
             f"**frame {frame} / {s.n_frames - 1}** · mode **{self.mode}**  \n"
             f"ball: {ball} · event: {event}  \n"
             f"labelled {sm['labelled']} ({sm['labelled_pct']:.1f} %) · events {sm['events']} · "
             f"still balls {sm['inactive_balls']} · court points {sm['court_points']}"
         )
-        nav.notice.content = f"_{s.notices[-1]}_" if s.notices else ""
+        nav.notice.content = f"_{md_escape(s.notices[-1])}_" if s.notices else ""
         few = len(s.events) <= 6  # labels of dense marks overlap: then only ticks (the events tab lists them)
         marks = [(f, e.split("_")[-1][:5] if few else "") for f, e in sorted(s.events.items())]
         keys = s.keyframes()
@@ -447,26 +564,61 @@ class ClientView:
             marks += [(f, "") for f in keys if f not in s.events]
         set_slider_marks(nav.slider, marks)
         prop = s.ball_proposals.get(frame)
+        score = s.ball_scores.get(frame)
         self.ball_panel.info.content = (
-            f"proposals: {sm['ball_proposals']} ({s.ball_proposal_source or 'none'})"
+            f"proposals: {sm['ball_proposals']} ({md_escape(s.ball_proposal_source or 'none')})"
             + (f" · here: ({prop[1] * s.width:.1f}, {prop[2] * s.height:.1f}) px" if prop and prop[0] else "")
+            + (f", confidence {score:.2f}" if prop and score is not None else "")
             + f"  \nkeyframes: {len(keys)}"
         )
         still = s.inactive_at(frame)
         self.still_panel.info.content = "stationary balls here: " + (
             ", ".join(f"#{b} ({x * s.width:.0f}, {y * s.height:.0f})" for b, (x, y) in sorted(still.items())) or "none")
         ev_list = ", ".join(f"{f}: {e}" for f, e in sorted(s.events.items())[:30])
-        self.events_panel.info.content = f"{len(s.events)} event(s): {ev_list or 'none'}"
+        pending = ", ".join(f"{f}: {e}" for f, e in sorted(s.event_proposals.items())[:20])
+        self.events_panel.info.content = (f"{len(s.events)} event(s): {ev_list or 'none'}"
+                                          + (f"  \nproposed (V accepts on its frame): {pending}" if pending else ""))
         self.court_panel.info.content = self._court_text()
 
     def _court_text(self) -> str:
         s = self.session
         if s.calibration is None:
-            return f"{len(s.points)} point(s). {s.calibration_error}"
+            return f"{len(s.points)} point(s). {md_escape(s.calibration_error)}"
         cal = s.calibration
-        rows = "\n".join(f"| {n} | {cal.residuals_px[n]:.2f}{' ⚠' if n in cal.suspect else ''} |" for n in cal.names)
+        rows = "\n".join(f"| {md_escape(n)} | {cal.residuals_px[n]:.2f}{' ⚠' if n in cal.suspect else ''} |"
+                         for n in cal.names)
         return (f"calibrated from {len(cal.names)} points, RMS **{cal.rms_px:.2f} px** (camera.yaml saved)\n\n"
                 f"| point | residual px |\n|---|---|\n{rows}")
+
+
+def shortcuts_markdown(event_labels: list[str]) -> str:
+    """The cheat-sheet: every hotkey of :data:`HOTKEYS` (event keys with this court's names)."""
+    def key(hotkey: str, modifier: str | None) -> str:
+        k = {"space": "Space", "backspace": "Backspace", "home": "Home", "end": "End"}.get(hotkey, hotkey)
+        return f"{modifier.replace('cmd/ctrl', 'Ctrl/Cmd').replace('shift', 'Shift')}+{k}" if modifier else k
+
+    rows = []
+    for label, hotkey, modifier, action, arg in HOTKEYS:
+        if action == "event_key" and arg:
+            if arg > len(event_labels):
+                continue
+            label = f"event {md_escape(event_labels[arg - 1])}"
+        rows.append(f"| {key(hotkey, modifier)} | {label} |")
+    rows.append("| ? | this cheat-sheet |")
+    return ("Keys work when no field has focus; Enter or Escape leaves a field.\n\n"
+            "| key | action |\n|---|---|\n" + "\n".join(rows))
+
+
+def error_markdown(clip: Clip, err: Exception) -> str:
+    """What the page shows for a clip that cannot be opened: file, line, problem and fix (all escaped)."""
+    if isinstance(err, FormatError):
+        where = md_escape(err.path) + (f", line {err.line}" if err.line is not None else "")
+        text = f"**{where}**  \n{md_escape(err.problem)}"
+        if err.fix:
+            text += f"  \nfix: {md_escape(err.fix)}"
+    else:
+        text = md_escape(f"{type(err).__name__}: {err}")
+    return f"⚠ **cannot open {md_escape(clip.root.name)}**  \n{text}"
 
 
 class LabelerApp:
@@ -475,18 +627,22 @@ class LabelerApp:
     Args:
         target: a clip folder, or a dataset (``manifest.yaml`` or clip sub-folders).
         host, port: where viser listens.
+        frame_slots: image planes per tab (1 sends every frame when shown; more keep the next frames in the
+            browser, see :mod:`labeler.framestack`).
     """
 
-    def __init__(self, target: str | Path, host: str = "127.0.0.1", port: int = 8080):
+    def __init__(self, target: str | Path, host: str = "127.0.0.1", port: int = 8080, frame_slots: int = FRAME_SLOTS):
         import viser
 
         self.clips = find_clips(target)
+        self.frame_slots = int(frame_slots)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         setup_server(self.server)
         self._caches: dict[Path, FrameCache] = {}
         self._cache_lock = threading.Lock()
         self.views: dict[int, ClientView] = {}
-        self._pickers: dict[int, object] = {}
+        self.errors: dict[int, object] = {}  # client id → the error folder shown in its page
+        self._tabs = 0
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
 
@@ -509,24 +665,67 @@ class LabelerApp:
             cache.close()
 
     def _connect(self, client) -> None:
+        install_keyboard(client)
         self._register_hotkeys(client)
+        self._tabs += 1
+        client.gui.add_button(SHORTCUTS_BUTTON, order=0.5).on_click(lambda ev: self._shortcuts(client))
         if len(self.clips) > 1:
             self._dataset_panel(client)
         self.open(client, self.clips[0])
+
+    def _shortcuts(self, client) -> None:
+        view = self.views.get(client.client_id)
+        if view is not None:
+            view.show_shortcuts()
 
     def _disconnect(self, client) -> None:
         view = self.views.pop(client.client_id, None)
         if view is not None:
             view.close()
+        self.errors.pop(client.client_id, None)
 
-    def open(self, client, clip: Clip) -> ClientView:
-        """Show ``clip`` in ``client``'s tab (replacing the clip it showed)."""
+    def open(self, client, clip: Clip, *, skip_bad_rows: bool = False) -> ClientView | None:
+        """Show ``clip`` in ``client``'s tab. A clip that cannot be opened leaves the tab's current clip open
+        and shows the file, line and fix in the page, with "open anyway, skip bad rows" (the file is not
+        touched). Returns the new view, or None."""
+        self._clear_error(client)
+        try:
+            session = LabelSession(clip, skip_bad_rows=skip_bad_rows, name=f"tab {self._tabs}")
+            self.frame_cache(clip).get(0)  # the video opens and decodes
+        except (FormatError, ValueError, KeyError, OSError) as e:
+            self._show_error(client, clip, e)
+            return None
         old = self.views.pop(client.client_id, None)
         if old is not None:
             old.close()
-        view = ClientView(self, client, clip)
+        view = ClientView(self, client, clip, session)
         self.views[client.client_id] = view
+        skipped = [e for errs in session.skipped.values() for e in errs]
+        if skipped:
+            first = skipped[0]
+            view._notice(f"opened with {len(skipped)} bad row(s) left out (the file is unchanged until you edit "
+                         f"it, then backed up): {first}")
         return view
+
+    def _clear_error(self, client) -> None:
+        folder = self.errors.pop(client.client_id, None)
+        if folder is not None:
+            try:
+                folder.remove()
+            except Exception:
+                pass
+
+    def _show_error(self, client, clip: Clip, err: Exception) -> None:
+        gui = client.gui
+        with gui.add_folder("⚠ clip not opened", order=0.8) as folder:
+            gui.add_markdown(error_markdown(clip, err))
+            if self.views.get(client.client_id) is not None:
+                gui.add_markdown(f"Still showing {md_escape(self.views[client.client_id].clip.root.name)}.")
+            if isinstance(err, FormatError) and err.line is not None and err.line > 1:
+                gui.add_button("open anyway, skip bad rows").on_click(
+                    lambda ev: self.open(client, clip, skip_bad_rows=True))
+            gui.add_button("try again").on_click(lambda ev: self.open(client, clip))
+        self.errors[client.client_id] = folder
 
     def _register_hotkeys(self, client) -> None:
         for label, key, modifier, action, arg in HOTKEYS:
@@ -546,8 +745,9 @@ class LabelerApp:
         with gui.add_folder("Dataset", order=0, expand_by_default=True):
             rows = [clip_overview(c) for c in self.clips]
             table = "| clip | frames | labelled | events | court pts |\n|---|---|---|---|---|\n" + "\n".join(
-                f"| {r['clip']} | {r.get('frames', '?')} | {r.get('labelled_pct', 0):.0f} % | {r.get('events', '?')} "
-                f"| {r.get('court_points', '?')} |" if "error" not in r else f"| {r['clip']} | ⚠ {r['error'][:60]} | | | |"
+                f"| {md_escape(r['clip'])} | {r.get('frames', '?')} | {r.get('labelled_pct', 0):.0f} % "
+                f"| {r.get('events', '?')} | {r.get('court_points', '?')} |" if "error" not in r
+                else f"| {md_escape(r['clip'])} | ⚠ {md_escape(r['error'][:80])} | | | |"
                 for r in rows)
             gui.add_markdown(table)
             names = [c.root.name for c in self.clips]

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
+
 from inference.clipio import BallTrack, Clip, HitEvents
 
 from .state import LabelSession, _ball_track
@@ -43,18 +45,31 @@ class ProgressClip(Clip):
         return _CountingFrames(super().frames(cache_size=cache_size), self._progress)
 
 
-def run_ball_detector(clip: Clip, weights: str | None, progress: ProgressFn, model: str = "wasb") -> tuple[BallTrack, str]:
+def run_ball_detector(clip: Clip, weights: str | None, progress: ProgressFn,
+                      model: str = "wasb") -> tuple[BallTrack, np.ndarray, str]:
     """Detect and track the ball over ``clip`` with a checkpoint (None: the shipped weights).
 
-    Returns the track and a one-line summary. Missing or wrong checkpoints raise the runner's clear errors.
+    Returns the track, ``(n_frames,)`` confidences in ``[0, 1]`` (:func:`confidence`) and a one-line summary.
+    Missing or wrong checkpoints raise the runner's clear errors.
     """
     from inference.detection.detect import BallDetectorRunner
 
     runner = BallDetectorRunner.from_weights(model, weights)
     result = runner.run(ProgressClip(clip.root, progress))
     seen = int((result.track.visibility > 0).sum())
-    return result.track, (f"detector proposals: ball in {seen} of {result.n_frames} frames "
-                          f"({result.fps:.1f} frames/s); accept per frame (Y) or for a range")
+    return result.track, confidence(result.tracked.score), (
+        f"detector proposals: ball in {seen} of {result.n_frames} frames ({result.fps:.1f} frames/s); "
+        "colour = confidence (red unsure, cyan sure); U jumps to the next unsure frame")
+
+
+def confidence(score: np.ndarray) -> np.ndarray:
+    """The tracker's per-frame scores (heatmap mass, any scale; 0 = nothing found) mapped to ``[0, 1]``: divided
+    by the 90th percentile of the frames with a detection, so a typical clear detection scores 1."""
+    score = np.nan_to_num(np.asarray(score, float), nan=0.0)
+    found = score[score > 0]
+    if not found.size:
+        return np.zeros_like(score)
+    return np.clip(score / max(float(np.percentile(found, 90)), 1e-9), 0.0, 1.0)
 
 
 def propose_events(session: LabelSession) -> HitEvents:

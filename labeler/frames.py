@@ -13,9 +13,31 @@ import time
 from collections import OrderedDict, deque
 from dataclasses import dataclass
 
+import numpy as np
+
 from inference.clipio import Clip, FrameSource
 
 from .viewer_common import encode_jpeg
+
+
+def stamp_frame_number(rgb: np.ndarray, index: int) -> np.ndarray:
+    """A copy of ``rgb (H, W, 3)`` with ``#index`` in a dark box at its top-left corner.
+
+    The number travels with the picture, so what the annotator reads is the frame on screen even while the
+    browser is still decoding the next one (the status line may already name it).
+    """
+    import cv2
+
+    img = np.array(rgb, copy=True)
+    h, w = img.shape[:2]
+    scale = max(0.4, w / 1600)
+    thick = max(1, int(round(scale * 2)))
+    text = f"#{index}"
+    (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
+    pad = int(4 * scale) + 2
+    img[: th + base + 2 * pad, : tw + 2 * pad] //= 4
+    cv2.putText(img, text, (pad, pad + th), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), thick, cv2.LINE_AA)
+    return img
 
 
 @dataclass
@@ -35,12 +57,14 @@ class FrameCache:
         capacity: frames kept (JPEG bytes, so 64 frames ≈ 10 MiB at 720p).
         ahead, behind: frames prefetched in the stepping direction and against it.
         prefetch: run the background thread (off for measuring cold decodes).
+        stamp: burn the frame number into each frame (:func:`stamp_frame_number`).
     """
 
     def __init__(self, clip: Clip, *, quality: int = 85, capacity: int = 96, ahead: int = 12, behind: int = 4,
-                 prefetch: bool = True):
+                 prefetch: bool = True, stamp: bool = True):
         self.clip = clip
         self.quality = int(quality)
+        self.stamp = bool(stamp)
         self.capacity = int(capacity)
         self.ahead, self.behind = int(ahead), int(behind)
         self.n_frames = int(clip.n_frames)
@@ -70,6 +94,11 @@ class FrameCache:
         with self._lock:
             return index in self._jpeg
 
+    def peek(self, index: int) -> bytes | None:
+        """JPEG bytes of frame ``index`` if already cached, else None (never decodes)."""
+        with self._lock:
+            return self._jpeg.get(int(index))
+
     def get(self, index: int) -> bytes:
         """JPEG bytes of frame ``index`` (cached, or decoded and encoded now)."""
         index = int(index)
@@ -89,6 +118,8 @@ class FrameCache:
                     return self._jpeg[index]
             t0 = time.perf_counter()
             rgb = self._source.read(index)
+            if self.stamp:
+                rgb = stamp_frame_number(rgb, index)
             t1 = time.perf_counter()
             data = encode_jpeg(rgb, self.quality)
             self.last = FrameTiming(t1 - t0, time.perf_counter() - t1)

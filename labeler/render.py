@@ -21,6 +21,7 @@ COLORS = {
     2: (255, 230, 40),     # hard to see
     3: (255, 60, 255),     # occluded
     "proposal": (40, 220, 255),
+    "unsure": (255, 60, 40),
     "trail": (255, 255, 255),
     "inactive": (150, 120, 255),
     "point": (255, 255, 0),
@@ -80,6 +81,15 @@ def court_segments(camera, court, samples: int = 8) -> dict[str, np.ndarray]:
     return out
 
 
+def confidence_color(score: float | None) -> tuple[int, int, int]:
+    """A proposal's colour: cyan when sure (or no score, e.g. interpolation), through orange to red when unsure."""
+    if score is None:
+        return COLORS["proposal"]
+    t = float(min(max(score, 0.0), 1.0))
+    lo, hi = np.array(COLORS["unsure"], float), np.array(COLORS["proposal"], float)
+    return tuple(int(round(v)) for v in lo + t * (hi - lo))
+
+
 def residual_segments(session: LabelSession) -> tuple[np.ndarray, np.ndarray]:
     """Clicked court points and their reprojections: ``(N, 2)`` clicked pixels, ``(N, 2)`` reprojected pixels."""
     size = np.array([session.width, session.height], float)
@@ -97,9 +107,28 @@ class Overlay:
     def __init__(self, scene, plane: ImagePlane, root: str = "/overlay"):
         self.scene, self.plane, self.root = scene, plane, root
         self._handles: dict[str, object] = {}
+        self._labels: dict[str, tuple[object, tuple]] = {}  # court point → (label handle, its position)
 
     def handles(self) -> list:
-        return list(self._handles.values())
+        return list(self._handles.values()) + [h for h, _ in self._labels.values()]
+
+    def point_labels(self, points_px: dict[str, np.ndarray], names: list[str], offset_px: float) -> None:
+        """Court point names next to their clicked positions (text drawn by the browser, never as HTML)."""
+        for name in list(self._labels):
+            if name not in points_px:
+                self._labels.pop(name)[0].remove()
+        for name, px in points_px.items():
+            pos = tuple(np.round(self.plane.pixel_to_scene(np.asarray(px, float)[None] + offset_px,
+                                                           z=OVERLAY_Z)[0], 6))
+            old = self._labels.get(name)
+            if old is not None and old[1] == pos:
+                continue
+            if old is not None:
+                old[0].remove()
+            index = names.index(name) if name in names else len(names)
+            handle = self.scene.add_label(f"{self.root}/point_names/{index}", name, position=pos,
+                                          font_screen_scale=0.8, anchor="top-left")
+            self._labels[name] = (handle, pos)
 
     def _scene_segments(self, seg_px: np.ndarray) -> np.ndarray:
         seg = np.asarray(seg_px, float).reshape(-1, 2)
@@ -134,7 +163,7 @@ class Overlay:
         if prop is not None and prop[0] > 0:
             c = np.array(prop[1:]) * size
             self.lines("proposal", np.concatenate([ring(c, r * 1.4, 12)[::2], cross(c, r * 0.5)]),
-                       COLORS["proposal"], 2.0)
+                       confidence_color(session.ball_scores.get(frame)), 2.0)
         else:
             self.clear("proposal")
         trail = session.trail(frame, trail_length)
@@ -156,6 +185,7 @@ class Overlay:
             for name in ("court_paint", "court_net", "court_glass", "court_mesh", "points", "reprojected",
                          "residuals", "selected"):
                 self.clear(name)
+            self.point_labels({}, [], 0.0)
             return
         if session.calibration is not None:
             for layer, segs in court_segments(session.calibration.camera, session.court).items():
@@ -164,6 +194,7 @@ class Overlay:
             for layer in ("paint", "net", "glass", "mesh"):
                 self.clear(f"court_{layer}")
         clicked, reproj = residual_segments(session)
+        self.point_labels(dict(zip(session.points, clicked)), session.court.point_names, r * 0.8)
         pts = [ring(c, r * 0.6, 8) for c in clicked]
         self.lines("points", np.concatenate(pts) if pts else np.empty((0, 2, 2)), COLORS["point"], 2.0)
         ok = np.isfinite(reproj).all(axis=1)

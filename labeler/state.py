@@ -28,7 +28,6 @@ from typing import Any, Literal
 import numpy as np
 
 from inference.clipio import (
-    EVENT_LABELS,
     BallTrack,
     Clip,
     CourtPoints,
@@ -36,12 +35,16 @@ from inference.clipio import (
     HitEvents,
     InactiveBalls,
 )
+from inference.clipio.atomic import backup_file, remove_stale_temp_files
 
 TABLES = ("ball", "inactive", "events", "points")
 VISIBILITY_NAMES = {0: "out of frame", 1: "visible", 2: "hard to see", 3: "occluded"}
-PLAYER_EVENTS = ("player_near", "player_far")
 InterpMethod = Literal["linear", "physics"]
 LOCK_NAME = ".label.lock"
+DEFAULT_MAX_GAP_S = 0.5
+"""Interpolation fills at most this long a gap between two keyframes (15 frames at 30 fps)."""
+_LAST_WRITER: dict[tuple[str, str, Any], str] = {}
+"""(clip folder, table, row key) → name of the session of this process that saved that row last."""
 
 
 @dataclass(frozen=True)
@@ -86,45 +89,61 @@ class SaveReport:
 
 
 # --------------------------------------------------------------------------- table ⇄ dictionary codecs
+Extra = dict[str, dict[Any, str]]
+"""Unknown columns of a file: column → (row key → text); kept on every save."""
+
+
+def _extra_of(obj, keys: list) -> Extra:
+    return {c: dict(zip(keys, np.asarray(v, str).tolist())) for c, v in obj.extra.items()}
+
+
+def _extra_for(extra: Extra | None, keys: list) -> dict[str, list[str]]:
+    return {c: [vals.get(k, "") for k in keys] for c, vals in (extra or {}).items()}
+
+
 def _ball_dict(track: BallTrack) -> dict[int, tuple[int, float, float]]:
     return {int(f): (int(v), float(x), float(y)) for f, v, (x, y) in zip(track.frame, track.visibility, track.xy)}
 
 
-def _ball_track(rows: dict) -> BallTrack:
+def _ball_track(rows: dict, extra: Extra | None = None) -> BallTrack:
     frames = sorted(rows)
     if not frames:
         return BallTrack.empty()
     vis = [rows[f][0] for f in frames]
     xy = [(math.nan, math.nan) if rows[f][0] == 0 else rows[f][1:] for f in frames]
-    return BallTrack(frames, vis, np.asarray(xy, dtype=float))
+    return BallTrack(frames, vis, np.asarray(xy, dtype=float), _extra_for(extra, frames))
 
 
 def _inactive_dict(balls: InactiveBalls) -> dict[tuple[int, int], tuple[float, float]]:
     return {(int(f), int(b)): (float(x), float(y)) for f, b, (x, y) in zip(balls.frame, balls.ball_no, balls.xy)}
 
 
-def _inactive_table(rows: dict) -> InactiveBalls:
+def _inactive_table(rows: dict, extra: Extra | None = None) -> InactiveBalls:
     keys = sorted(rows)
     if not keys:
         return InactiveBalls.empty()
-    return InactiveBalls([k[0] for k in keys], [k[1] for k in keys], np.asarray([rows[k] for k in keys]))
+    return InactiveBalls([k[0] for k in keys], [k[1] for k in keys], np.asarray([rows[k] for k in keys]),
+                         _extra_for(extra, keys))
 
 
 def _events_dict(events: HitEvents) -> dict[int, str]:
     return {int(f): str(e) for f, e in zip(events.frame, events.event)}
 
 
-def _events_table(rows: dict) -> HitEvents:
+def _events_table(rows: dict, extra: Extra | None = None) -> HitEvents:
     frames = sorted(rows)
-    return HitEvents(frames, [rows[f] for f in frames]) if frames else HitEvents.empty()
+    return HitEvents(frames, [rows[f] for f in frames], _extra_for(extra, frames)) if frames else HitEvents.empty()
 
 
 def _points_dict(points: CourtPoints) -> dict[str, tuple[float, float]]:
     return {n: (float(x), float(y)) for n, (x, y) in zip(points.names, points.xy)}
 
 
-def _points_table(rows: dict) -> CourtPoints:
-    return CourtPoints.from_dict(dict(rows)) if rows else CourtPoints([], np.empty((0, 2)))
+def _points_table(rows: dict, extra: Extra | None = None) -> CourtPoints:
+    names = list(rows)
+    if not names:
+        return CourtPoints([], np.empty((0, 2)))
+    return CourtPoints(names, np.array([rows[n] for n in names], float).reshape(-1, 2), _extra_for(extra, names))
 
 
 def _same(a: Any, b: Any) -> bool:
@@ -147,6 +166,15 @@ def _same(a: Any, b: Any) -> bool:
     return True
 
 
+def _row_name(c: Change) -> str:
+    """How a row is named to the annotator: ``ball @12``, ``event @30``, ``court point far_left`` …"""
+    if c.table == "points":
+        return f"court point {c.key}"
+    if c.table == "inactive":
+        return f"stationary ball {c.key[1]} @{c.key[0]}"
+    return f"{'event' if c.table == 'events' else 'ball'} @{c.key}"
+
+
 def _fingerprint(path: Path) -> tuple[int, int, int] | None:
     """(inode, mtime_ns, size) of a file, None when absent; atomic replaces always change the inode."""
     try:
@@ -165,9 +193,17 @@ class LabelSession:
         court: the court model (for court points, event vocabulary and live calibration); default: the
             clip's court YAML.
         autosave: save the touched tables after every edit (the labeler always does; tests may turn it off).
+        skip_bad_rows: open a file with bad rows anyway, leaving those rows out (:attr:`skipped` lists them);
+            the file is not touched until an edit saves it, and then its original is first copied to
+            ``.rally3d/backup/``. Without it a bad row raises :class:`FormatError`.
+        name: how other tabs name this one in their messages (e.g. "tab 2").
+
+    Attributes:
+        max_gap: interpolation never fills more than this many frames between two keyframes.
     """
 
-    def __init__(self, clip: Clip | str | Path, court=None, *, autosave: bool = True):
+    def __init__(self, clip: Clip | str | Path, court=None, *, autosave: bool = True, skip_bad_rows: bool = False,
+                 name: str = "another tab"):
         self.clip = clip if isinstance(clip, Clip) else Clip(clip)
         info = self.clip.info
         self.width, self.height, self.fps = info.width, info.height, info.fps
@@ -178,12 +214,18 @@ class LabelSession:
             court = load_court(self.clip.court_path())
         self.court = court
         self.autosave = autosave
+        self.name = name
+        self.skip_bad_rows = skip_bad_rows
+        self.skipped: dict[str, list[FormatError]] = {t: [] for t in TABLES}
+        self.max_gap = max(2, int(round(DEFAULT_MAX_GAP_S * self.fps)))
         self.frame = 0
         self.undo_stack: list[Edit] = []
         self.redo_stack: list[Edit] = []
         self.ball_proposals: dict[int, tuple[int, float, float]] = {}
         self.ball_proposal_source: str = ""
         self.event_proposals: dict[int, str] = {}
+        self.ball_scores: dict[int, float] = {}  # frame → the detector's confidence (0..1) of its proposal
+        self.interpolation_skipped: list[tuple[int, int, str]] = []  # (keyframe, keyframe, why) of the last run
         self.notices: list[str] = []
         self.calibration = None  # inference.calibration.CalibrationResult of the current points
         self.calibration_error: str = ""
@@ -191,10 +233,16 @@ class LabelSession:
         self._base: dict[str, dict] = {t: {} for t in TABLES}
         self._dirty: dict[str, set] = {t: set() for t in TABLES}
         self._seen: dict[str, tuple | None] = {t: None for t in TABLES}
+        self._extra: dict[str, Extra] = {t: {} for t in TABLES}
         self._listeners: list[Callable[[LabelSession], None]] = []
         for table in TABLES:
             self._load(table)
         self._recalibrate(write=False)
+        with self._locked():
+            litter = remove_stale_temp_files(self.clip.root)
+        if litter:
+            self.notices.append(f"removed {len(litter)} temporary file(s) left by a save that did not finish: "
+                                + ", ".join(p.name for p in litter[:3]))
 
     # ------------------------------------------------------------------------------- tables & files
     @property
@@ -218,24 +266,40 @@ class LabelSession:
                 "events": self.clip.events_path, "points": self.clip.court_points_path}[table]
 
     def _read_disk(self, table: str) -> dict:
+        """The rows of ``table``'s file (bad rows left out when :attr:`skip_bad_rows`); remembers its extra columns."""
         clip, n = self.clip, self.n_frames
+        skipped: list[FormatError] | None = [] if self.skip_bad_rows else None
         if table == "ball":
-            return _ball_dict(clip.read_ball(missing_ok=True, n_frames=n))
-        if table == "inactive":
-            return _inactive_dict(clip.read_inactive_balls(missing_ok=True, n_frames=n))
-        if table == "events":
-            return _events_dict(clip.read_events(missing_ok=True, n_frames=n))
-        return _points_dict(clip.read_court_points(known_names=self.court.point_names, missing_ok=True))
+            obj = clip.read_ball(missing_ok=True, n_frames=n, skipped=skipped)
+            rows = _ball_dict(obj)
+        elif table == "inactive":
+            obj = clip.read_inactive_balls(missing_ok=True, n_frames=n, skipped=skipped)
+            rows = _inactive_dict(obj)
+        elif table == "events":
+            obj = clip.read_events(missing_ok=True, n_frames=n, labels=self.event_labels, skipped=skipped)
+            rows = _events_dict(obj)
+        else:
+            obj = clip.read_court_points(known_names=self.court.point_names, missing_ok=True, skipped=skipped)
+            rows = _points_dict(obj)
+        self._extra[table] = _extra_of(obj, list(rows))
+        if skipped is not None:
+            self.skipped[table] = skipped
+        return rows
 
     def _write_disk(self, table: str, rows: dict) -> Path:
-        clip = self.clip
+        clip, extra = self.clip, self._extra[table]
+        if self.skipped[table] and self.path(table).is_file():  # keep the bad rows' original before replacing
+            copy = backup_file(self.path(table), self.clip.root / ".rally3d" / "backup")
+            self.notices.append(f"{self.path(table).name} had {len(self.skipped[table])} bad row(s), left out; "
+                                f"its original is kept in {copy}")
+            self.skipped[table] = []
         if table == "ball":
-            return clip.write_ball(_ball_track(rows))
+            return clip.write_ball(_ball_track(rows, extra))
         if table == "inactive":
-            return clip.write_inactive_balls(_inactive_table(rows))
+            return clip.write_inactive_balls(_inactive_table(rows, extra))
         if table == "events":
-            return clip.write_events(_events_table(rows))
-        return clip.write_court_points(_points_table(rows))
+            return clip.write_events(_events_table(rows, extra))
+        return clip.write_court_points(_points_table(rows, extra))
 
     def _load(self, table: str) -> None:
         fp = _fingerprint(self.path(table))
@@ -285,6 +349,9 @@ class LabelSession:
                     continue
                 path = self._write_disk(table, self.tables[table])
                 report.written.append(path)
+                root = str(self.clip.root.resolve())
+                for key in self._dirty[table]:
+                    _LAST_WRITER[(root, table, key)] = self.name
                 self._base[table] = dict(self.tables[table])
                 self._dirty[table].clear()
                 self._seen[table] = _fingerprint(path)
@@ -337,7 +404,14 @@ class LabelSession:
         self._dirty[table].add(key)
 
     def apply(self, label: str, changes: list[Change]) -> Edit | None:
-        """Apply ``changes`` as one undoable edit and autosave; no-op changes are dropped."""
+        """Apply ``changes`` as one undoable edit and autosave; no-op changes are dropped.
+
+        Rows another writer saved meanwhile are read first, so ``old`` (what undo brings back) is what the
+        file held, not this session's older view.
+        """
+        if self.autosave:
+            self.sync()
+            changes = [Change(c.table, c.key, self.tables[c.table].get(c.key), c.new) for c in changes]
         changes = [c for c in changes if not _same(c.old, c.new)]
         if not changes:
             return None
@@ -358,26 +432,44 @@ class LabelSession:
         self._notify()
 
     def undo(self) -> Edit | None:
-        """Revert the last edit (and save); None when there is nothing to undo."""
-        if not self.undo_stack:
-            return None
-        edit = self.undo_stack.pop()
-        for c in reversed(edit.changes):
-            self._set(c.table, c.key, c.old)
-        self.redo_stack.append(edit)
-        self._after_edit(edit.changes)
-        return edit
+        """Revert the last edit (and save); None when there is nothing to undo.
+
+        Only rows that still hold what this session wrote are reverted: a row another tab or labeler changed
+        since is left as they made it, and :attr:`notices` says which rows and who changed them.
+        """
+        return self._replay(self.undo_stack, self.redo_stack, undo=True)
 
     def redo(self) -> Edit | None:
-        """Re-apply the last undone edit (and save)."""
-        if not self.redo_stack:
+        """Re-apply the last undone edit (and save); rows changed elsewhere since are left alone (as in undo)."""
+        return self._replay(self.redo_stack, self.undo_stack, undo=False)
+
+    def _replay(self, source: list[Edit], target: list[Edit], *, undo: bool) -> Edit | None:
+        if not source:
             return None
-        edit = self.redo_stack.pop()
+        self.sync()  # see what other writers did to these rows since
+        edit = source.pop()
+        mine, theirs = [], []
         for c in edit.changes:
-            self._set(c.table, c.key, c.new)
-        self.undo_stack.append(edit)
-        self._after_edit(edit.changes)
-        return edit
+            expected = c.new if undo else c.old
+            (mine if _same(self.tables[c.table].get(c.key), expected) else theirs).append(c)
+        for c in reversed(mine) if undo else mine:
+            self._set(c.table, c.key, c.old if undo else c.new)
+        if theirs:
+            shown = ", ".join(f"{_row_name(c)} (by {self._last_writer(c)})" for c in theirs[:4])
+            more = f" and {len(theirs) - 4} more" if len(theirs) > 4 else ""
+            self.notices.append(f"{'undo' if undo else 'redo'} of '{edit.label}' left {len(theirs)} row(s) as "
+                                f"changed since: {shown}{more}")
+        if not mine:
+            self._notify()
+            return Edit(edit.label, [])
+        done = Edit(edit.label, mine)
+        target.append(done)
+        self._after_edit(mine)
+        return done
+
+    def _last_writer(self, change: Change) -> str:
+        return _LAST_WRITER.get((str(self.clip.root.resolve()), change.table, change.key),
+                                "another labeler or a hand edit")
 
     def _change(self, table: str, key, new) -> Change:
         return Change(table, key, self.tables[table].get(key), new)
@@ -452,58 +544,82 @@ class LabelSession:
         return np.asarray(rows, dtype=float).reshape(-1, 3)
 
     # --------------------------------------------------------------------------------- interpolation
-    def interpolate(self, method: InterpMethod = "linear", start: int = 0, stop: int | None = None) -> int:
-        """Propose ball positions for unlabelled frames between keyframes in ``[start, stop]``.
+    def flight(self, frame: int) -> tuple[int, int]:
+        """``(first, last)`` frame of the flight holding ``frame``: from the event at or before it to the next one.
 
-        ``linear``: straight between neighbouring keyframes. ``physics``: within each stretch between two
-        hit events (a flight), a least-squares parabola in time through that flight's keyframes (quadratic
-        in x and y: gravity bends the image path; at least 3 keyframes, else linear). The proposals are
-        provisional (:attr:`ball_proposals`) until :meth:`accept_ball_proposals`. Returns their number.
+        The clip's ends count as bounds. A frame with an event starts a flight (the contact is its first frame).
+        """
+        lo = max((e for e in self.events if e <= frame), default=0)
+        hi = min((e for e in self.events if e > frame), default=self.n_frames - 1)
+        return lo, hi
+
+    def interpolate(self, method: InterpMethod = "physics", start: int = 0, stop: int | None = None,
+                    max_gap: int | None = None) -> int:
+        """Propose ball positions for the unlabelled frames between two keyframes of one flight.
+
+        A gap is filled only when no event lies strictly between its two keyframes (a hit or bounce changes
+        the path) and the keyframes are at most ``max_gap`` frames apart (default :attr:`max_gap`): a long
+        gap is not guessed. ``physics`` fits a parabola in time (gravity under perspective, x and y each
+        quadratic) through up to two more keyframes of the same flight on each side, corrected to pass through
+        both keyframes exactly; with fewer than 3 keyframes in the flight it is a straight line, as is
+        ``linear``. Filled rows are visibility 1 (visible) and provisional (:attr:`ball_proposals`) until
+        accepted. Returns their number.
         """
         if method not in ("linear", "physics"):
             raise ValueError(f"unknown interpolation {method!r}; choose linear or physics")
+        max_gap = self.max_gap if max_gap is None else int(max_gap)
         stop = self.n_frames - 1 if stop is None else min(int(stop), self.n_frames - 1)
         keys = self.keyframes()
         proposals: dict[int, tuple[int, float, float]] = {}
-        event_frames = sorted(self.events)
+        self.interpolation_skipped = []
         for a, b in zip(keys[:-1], keys[1:]):
             gap = [f for f in range(a + 1, b) if start <= f <= stop and f not in self.ball]
             if not gap:
                 continue
-            vis = max(self.ball[a][0], self.ball[b][0])
-            xy = None
-            if method == "physics":
-                xy = self._parabola(a, b, gap, keys, event_frames)
-            if xy is None:
-                s = (np.asarray(gap, float) - a) / (b - a)
-                pa, pb = np.asarray(self.ball[a][1:]), np.asarray(self.ball[b][1:])
-                xy = pa[None] + s[:, None] * (pb - pa)[None]
-            xy = np.clip(xy, 0.0, 1.0)
-            for f, (x, y) in zip(gap, xy):
-                proposals[f] = (vis, float(x), float(y))
+            crossing = [e for e in self.events if a < e < b]
+            if crossing or b - a > max_gap:
+                self.interpolation_skipped.append(
+                    (a, b, f"event @{crossing[0]}" if crossing else f"{b - a} frames apart (max {max_gap})"))
+                continue
+            xy = self._gap_positions(a, b, gap, keys, method)
+            for f, (x, y) in zip(gap, np.clip(xy, 0.0, 1.0)):
+                proposals[f] = (1, float(x), float(y))
         self.ball_proposals = proposals
         self.ball_proposal_source = f"interpolation ({method})"
         self._notify()
         return len(proposals)
 
-    def _parabola(self, a: int, b: int, gap: list[int], keys: list[int], events: list[int]) -> np.ndarray | None:
-        """Quadratic fit through the keyframes of the flight (between events) holding ``a`` and ``b``."""
-        lo = max([e for e in events if e <= a], default=0)
-        hi = min([e for e in events if e >= b], default=self.n_frames - 1)
-        if any(a < e < b for e in events):
-            return None  # a contact between the two keyframes: not one flight
-        flight = [k for k in keys if lo <= k <= hi]
-        if len(flight) < 3:
-            return None
-        t = np.asarray(flight, float)
-        xy = np.asarray([self.ball[k][1:] for k in flight])
-        tq = np.asarray(gap, float)
-        return np.stack([np.polyval(np.polyfit(t, xy[:, i], 2), tq) for i in range(2)], axis=1)
+    def _gap_positions(self, a: int, b: int, gap: list[int], keys: list[int], method: str) -> np.ndarray:
+        """``(len(gap), 2)`` positions between keyframes ``a`` and ``b`` (one flight)."""
+        pa, pb = np.asarray(self.ball[a][1:]), np.asarray(self.ball[b][1:])
+        t = np.asarray(gap, float)
+        line = pa[None] + ((t - a) / (b - a))[:, None] * (pb - pa)[None]
+        if method == "linear":
+            return line
+        lo, hi = self.flight(a)
+        before = [k for k in keys if lo <= k < a][-2:]
+        after = [k for k in keys if b < k <= hi][:2]
+        support = [*before, a, b, *after]
+        if len(support) < 3:
+            return line
+        ts = np.asarray(support, float)
+        pts = np.asarray([self.ball[k][1:] for k in support])
+        fit = np.stack([np.polyval(np.polyfit(ts, pts[:, i], 2), t) for i in range(2)], axis=1)
+        ends = np.stack([np.polyval(np.polyfit(ts, pts[:, i], 2), [a, b]) for i in range(2)], axis=1)
+        # a straight correction makes the curve meet both keyframes exactly
+        err_a, err_b = pa - ends[0], pb - ends[1]
+        return fit + err_a[None] + ((t - a) / (b - a))[:, None] * (err_b - err_a)[None]
 
-    def set_ball_proposals(self, track: BallTrack, source: str) -> int:
-        """Show a model's track (e.g. the ball detector's) as proposals; returns how many frames it covers."""
+    def set_ball_proposals(self, track: BallTrack, source: str, scores: np.ndarray | None = None) -> int:
+        """Show a model's track (e.g. the ball detector's) as proposals; returns how many frames it covers.
+
+        ``scores``: ``(n_frames,)`` the model's confidence in ``[0, 1]`` per frame (0 where it found nothing);
+        it colours the proposals and drives :meth:`next_uncertain`.
+        """
         self.ball_proposals = _ball_dict(track)
         self.ball_proposals = {f: r for f, r in self.ball_proposals.items() if 0 <= f < self.n_frames}
+        self.ball_scores = {} if scores is None else {
+            f: float(v) for f, v in enumerate(np.clip(np.asarray(scores, float), 0, 1)[: self.n_frames])}
         self.ball_proposal_source = source
         self._notify()
         return len(self.ball_proposals)
@@ -518,6 +634,25 @@ class LabelSession:
         self.apply(f"accept {len(changes)} ball proposal(s)", changes)
         self._notify()
         return len(changes)
+
+    def accept_flight_proposals(self, frame: int) -> tuple[int, tuple[int, int]]:
+        """Accept the proposals of the flight holding ``frame`` (it stops at the events on both sides).
+
+        Returns the number accepted and the flight's ``(first, last)`` frame.
+        """
+        lo, hi = self.flight(self._check_frame(frame))
+        return self.accept_ball_proposals(range(lo, hi + 1)), (lo, hi)
+
+    def next_uncertain(self, frame: int, threshold: float = 0.5) -> int | None:
+        """The next frame after ``frame`` (wrapping) that is not labelled and where the detector was unsure:
+        its confidence is below ``threshold`` (0 where it found no ball). None without detector scores."""
+        if not self.ball_scores:
+            return None
+        for k in range(1, self.n_frames + 1):
+            f = (frame + k) % self.n_frames
+            if f not in self.ball and self.ball_scores.get(f, 0.0) < threshold:
+                return f
+        return None
 
     def reject_ball_proposals(self, frames: Iterable[int] | None = None) -> int:
         """Drop proposals (all, or those at ``frames``)."""
@@ -580,8 +715,7 @@ class LabelSession:
     @property
     def event_labels(self) -> list[str]:
         """The fine-grained event vocabulary of this clip's court: its surfaces, then the players."""
-        labels = [e for e in self.court.event_labels if e in EVENT_LABELS] + list(PLAYER_EVENTS)
-        return list(dict.fromkeys(labels))
+        return self.court.annotation_labels
 
     def set_event(self, frame: int, label: str | None) -> None:
         """Set (or with ``None`` remove) the event of ``frame``."""
@@ -626,6 +760,54 @@ class LabelSession:
 
     def remove_point(self, name: str) -> None:
         self.apply(f"remove court point {name}", [self._change("points", name, None)])
+
+    def expected_points_px(self) -> dict[str, np.ndarray]:
+        """Where the court points should be in the image, in pixels, as far as the clicks so far tell.
+
+        Through the live calibration when there is one; else, from 4 clicked floor points on, through the
+        floor's homography (floor points only). Points that cannot be placed yet are left out.
+        """
+        court = self.court
+        if self.calibration is not None:
+            cam = self.calibration.camera
+            names = court.point_names
+            px = cam.project(court.point_array(names))
+            return {n: p for n, p in zip(names, px) if np.isfinite(p).all()}
+        ground = [n for n in self.points if abs(court.points[n][2]) < 1e-6]
+        if len(ground) < 4:
+            return {}
+        import cv2
+
+        src = np.array([court.points[n][:2] for n in ground], np.float64)
+        dst = np.array([self.points[n] for n in ground], np.float64) * [self.width, self.height]
+        H, _ = cv2.findHomography(src, dst, 0)
+        if H is None:
+            return {}
+        out = {}
+        for n in court.point_names:
+            x, y, z = court.points[n]
+            if abs(z) < 1e-6:
+                q = H @ np.array([x, y, 1.0])
+                if q[2] > 1e-9:
+                    out[n] = q[:2] / q[2]
+        return out
+
+    def next_point(self, after: str | None = None, view_px: tuple[float, float, float, float] | None = None,
+                   ) -> str | None:
+        """The court point to click next: the first unplaced one (in the court's order, after ``after``)
+        that is expected inside ``view_px`` = ``(x0, y0, x1, y1)`` (default the whole image); points whose
+        place is not known yet come next, then the rest. None when every point is placed."""
+        names = self.court.point_names
+        start = names.index(after) + 1 if after in names else 0
+        order = [n for n in names[start:] + names[:start] if n not in self.points]
+        if not order:
+            return None
+        x0, y0, x1, y1 = view_px or (0.0, 0.0, float(self.width), float(self.height))
+        x0, y0, x1, y1 = max(x0, 0.0), max(y0, 0.0), min(x1, self.width), min(y1, self.height)
+        expected = self.expected_points_px()
+        inside = [n for n in order if n in expected and x0 <= expected[n][0] <= x1 and y0 <= expected[n][1] <= y1]
+        unknown = [n for n in order if n not in expected]
+        return (inside or unknown or order)[0]
 
     def _recalibrate(self, *, write: bool) -> None:
         """Calibrate from the current points; write camera.yaml on success (when ``write``)."""

@@ -8,13 +8,28 @@ pointer offset).
 """
 from __future__ import annotations
 
+import html
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 DEFAULT_FOV_DEG = 50.0
 """Vertical field of view of the fitted camera."""
+
+
+_MARKDOWN_PUNCTUATION = re.compile(r"([\\`*_{}\[\]()+\-.!|~])")
+
+
+def md_escape(text: object) -> str:
+    """Text from files or folder names made inert for viser's Markdown (which renders raw HTML).
+
+    Markdown punctuation is backslash-escaped (no links, emphasis or table cells from the text), then
+    ``& < >`` become entities and ``#`` too, so ``<iframe srcdoc=…>`` shows as text and runs nothing.
+    """
+    escaped = _MARKDOWN_PUNCTUATION.sub(r"\\\1", str(text))
+    return html.escape(escaped, quote=False).replace("#", "&#35;")
 
 
 def setup_server(server, *, dark: bool = False) -> None:

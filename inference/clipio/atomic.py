@@ -1,11 +1,14 @@
-"""Atomic file writes: write to a temporary file in the same folder, fsync, then rename.
+"""Atomic file writes: write to a temporary file in the same folder, fsync, then rename; clean-up of the
+temporary files a crashed write leaves behind.
 
 A crash mid-write leaves the old file intact; readers never see a half-written file.
 """
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
+import time
 from pathlib import Path
 
 
@@ -39,3 +42,46 @@ def _umask() -> int:
 def atomic_write_text(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8, ``\\n`` line ends) to ``path`` atomically."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+STALE_TEMP_S = 60.0
+"""A temporary file of an atomic write older than this is litter from a crashed write (a write takes ms)."""
+
+
+def stale_temp_files(folder: str | Path, older_than_s: float = STALE_TEMP_S) -> list[Path]:
+    """Temporary files of atomic writes (``.<name>.<random>.tmp``) in ``folder`` older than ``older_than_s``."""
+    now = time.time()
+    out = []
+    for p in sorted(Path(folder).glob(".*.tmp")):
+        try:
+            if p.is_file() and now - p.stat().st_mtime > older_than_s:
+                out.append(p)
+        except FileNotFoundError:  # finished (renamed) meanwhile
+            continue
+    return out
+
+
+def remove_stale_temp_files(folder: str | Path, older_than_s: float = STALE_TEMP_S) -> list[Path]:
+    """Delete :func:`stale_temp_files` of ``folder`` (left by a save that crashed); returns what was removed."""
+    removed = []
+    for p in stale_temp_files(folder, older_than_s):
+        try:
+            p.unlink()
+            removed.append(p)
+        except FileNotFoundError:
+            pass
+    return removed
+
+
+def backup_file(path: str | Path, folder: str | Path) -> Path:
+    """Copy ``path`` to ``folder/<name>.<timestamp>`` before it is replaced; returns the copy's path."""
+    path, folder = Path(path), Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    dest = folder / f"{path.name}.{stamp}"
+    n = 1
+    while dest.exists():  # two backups of one file within a second
+        dest = folder / f"{path.name}.{stamp}-{n}"
+        n += 1
+    shutil.copy2(path, dest)
+    return dest

@@ -168,48 +168,69 @@ class Clip:
             return empty()
         return reader(path, **kwargs)
 
-    def read_ball(self, *, missing_ok: bool = False, n_frames: int | None = None) -> BallTrack:
-        """``ball.csv``; frames must be below ``n_frames`` (default: clip.yaml's, when it has one)."""
+    def read_ball(
+        self, *, missing_ok: bool = False, n_frames: int | None = None, skipped: list[FormatError] | None = None
+    ) -> BallTrack:
+        """``ball.csv``; frames must be below ``n_frames`` (default: clip.yaml's, when it has one).
+
+        With ``skipped=[]`` (every table reader takes it) bad rows are left out and their errors appended.
+        """
         return self._read(
             self.ball_path,
             csvfiles.read_ball_csv,
             BallTrack.empty,
             missing_ok,
             n_frames=self._frame_limit(n_frames),
+            skipped=skipped,
         )
 
     def write_ball(self, track: BallTrack) -> Path:
         return csvfiles.write_ball_csv(self.ball_path, track)
 
-    def read_inactive_balls(self, *, missing_ok: bool = False, n_frames: int | None = None) -> InactiveBalls:
+    def read_inactive_balls(
+        self, *, missing_ok: bool = False, n_frames: int | None = None, skipped: list[FormatError] | None = None
+    ) -> InactiveBalls:
         return self._read(
             self.inactive_balls_path,
             csvfiles.read_inactive_balls_csv,
             InactiveBalls.empty,
             missing_ok,
             n_frames=self._frame_limit(n_frames),
+            skipped=skipped,
         )
 
     def write_inactive_balls(self, balls: InactiveBalls) -> Path:
         return csvfiles.write_inactive_balls_csv(self.inactive_balls_path, balls)
 
     def read_events(
-        self, *, gt: bool = False, missing_ok: bool = False, n_frames: int | None = None
+        self,
+        *,
+        gt: bool = False,
+        missing_ok: bool = False,
+        n_frames: int | None = None,
+        labels: Iterable[str] | None = None,
+        skipped: list[FormatError] | None = None,
     ) -> HitEvents:
-        """``events.csv`` (or ``gt/events.csv``)."""
+        """``events.csv`` (or ``gt/events.csv``); ``labels``: the court's vocabulary (default: every label)."""
         return self._read(
             self._path("events.csv", gt),
             csvfiles.read_events_csv,
             HitEvents.empty,
             missing_ok,
             n_frames=self._frame_limit(n_frames),
+            labels=None if labels is None else list(labels),
+            skipped=skipped,
         )
 
     def write_events(self, events: HitEvents, *, gt: bool = False) -> Path:
         return csvfiles.write_events_csv(self._path("events.csv", gt), events)
 
     def read_court_points(
-        self, *, known_names: Iterable[str] | None = None, missing_ok: bool = False
+        self,
+        *,
+        known_names: Iterable[str] | None = None,
+        missing_ok: bool = False,
+        skipped: list[FormatError] | None = None,
     ) -> CourtPoints:
         """``court_points.csv``; with ``known_names`` (the court YAML's points) other names are rejected."""
         return self._read(
@@ -218,6 +239,7 @@ class Clip:
             lambda: CourtPoints([], []),
             missing_ok,
             known_names=known_names,
+            skipped=skipped,
         )
 
     def write_court_points(self, points: CourtPoints) -> Path:
@@ -263,6 +285,21 @@ class Clip:
             raise FormatError(path, "file not found",
                               fix=f"run `rally3d calibrate {self.root}` (court_points.csv → camera.yaml)")
         return Camera.load(path)
+
+    def check_camera(self, camera: Camera, path: Path | None = None) -> None:
+        """Refuse a calibration made for another frame size than clip.yaml's (its projection is wrong everywhere).
+
+        Raises:
+            FormatError: naming ``path`` (default camera.yaml), both sizes and the fix.
+        """
+        size = tuple(int(v) for v in camera.image_size)
+        if size != (self.info.width, self.info.height):
+            raise FormatError(
+                path or self.camera_path,
+                f"the calibration is for {size[0]}×{size[1]} frames but the video is "
+                f"{self.info.width}×{self.info.height}",
+                fix="calibrate this video (court_points.csv + rally3d calibrate) or pass the right --camera",
+            )
 
     def write_camera(self, camera: Camera, *, gt: bool = False) -> Path:
         """Save ``camera`` to ``camera.yaml`` (or ``gt/camera.yaml``) via ``camera.save``."""

@@ -27,6 +27,7 @@ import yaml
 from .atomic import atomic_write_text
 from .csvtable import read_text
 from .errors import FormatError
+from .structured import parse_yaml, yaml_key_lines
 
 REQUIRED_KEYS = ("sport", "fps", "width", "height", "video")
 OPTIONAL_TEXT_KEYS = ("camera_id", "split", "licence", "court")
@@ -136,18 +137,8 @@ def read_clip_yaml(path: str | Path) -> ClipInfo:
     """Read and validate ``clip.yaml``; ``FormatError`` names the line of the offending key."""
     path = Path(path)
     text = read_text(path)
-    try:
-        data = yaml.safe_load(text)
-        lines = _key_lines(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        problem = getattr(err, "problem", None) or str(err)
-        raise FormatError(
-            path,
-            f"not valid YAML ({problem})",
-            line=mark.line + 1 if mark else None,
-            fix="check indentation and 'key: value' syntax",
-        ) from None
+    data = parse_yaml(path, text)
+    lines = yaml_key_lines(path, text)
     if not isinstance(data, dict):
         raise FormatError(
             path,
@@ -166,14 +157,6 @@ def read_clip_yaml(path: str | Path) -> ClipInfo:
         raise FormatError(path, str(err), line=lines.get(err.key), fix=fix) from None
     except TypeError as err:  # e.g. a key that is not a string
         raise FormatError(path, str(err), fix="use plain 'key: value' lines") from None
-
-
-def _key_lines(text: str) -> dict[Any, int]:
-    """1-based line of each top-level key."""
-    node = yaml.compose(text)
-    if not isinstance(node, yaml.MappingNode):
-        return {}
-    return {key.value: key.start_mark.line + 1 for key, _ in node.value}
 
 
 def write_clip_yaml(path: str | Path, info: ClipInfo) -> Path:

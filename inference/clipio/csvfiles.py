@@ -1,7 +1,9 @@
 """Readers and writers for the CSV files of a clip folder (docs/formats.md).
 
 Readers validate everything and raise :class:`~inference.clipio.errors.FormatError` naming the file,
-the line and the fix; rows may come in any order and are returned sorted. Writers are atomic and
+the line and the fix; rows may come in any order and are returned sorted. Columns a reader does not know
+(a hand-added ``note``) are kept as text and written back after the known ones. With ``skipped=[]`` a
+reader leaves bad rows out instead of failing (the labeler's "open anyway, skip bad rows"). Writers are atomic and
 deterministic: header, then rows sorted by frame, normalised coordinates with 7 decimals and metres
 with 5.
 """
@@ -9,12 +11,13 @@ with 5.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from .csvtable import CsvTable, closest, duplicated, format_floats, format_ints, write_csv
+from .csvtable import CsvTable, closest, duplicated, format_floats, format_ints, parse_rows, write_csv
+from .errors import FormatError
 from .tables import BALL3D_KINDS, EVENT_LABELS, Ball3D, BallTrack, CourtPoints, HitEvents, InactiveBalls
 
 BALL_COLUMNS = ("frame", "visibility", "x", "y")
@@ -42,17 +45,24 @@ def _unit_xy(table: CsvTable, *, allow_empty: bool = False) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------- ball.csv
-def read_ball_csv(path: str | Path, *, n_frames: int | None = None) -> BallTrack:
-    """Read ``ball.csv`` (``frame,visibility,x,y``).
+def read_ball_csv(
+    path: str | Path, *, n_frames: int | None = None, skipped: list[FormatError] | None = None
+) -> BallTrack:
+    """Read ``ball.csv`` (``frame,visibility,x,y`` plus any extra columns, kept in ``extra``).
 
     Args:
         path: the file.
         n_frames: frames of the video, when known; rows at or beyond it are rejected.
+        skipped: when a list is given, bad rows are left out (their errors appended) instead of failing.
 
     Returns:
         The track, sorted by frame. Visibility-0 rows may leave x,y empty or write 0,0; both give NaN.
     """
-    table = CsvTable.read(path, BALL_COLUMNS)
+    table = CsvTable.read(path, BALL_COLUMNS, skipped=skipped)
+    return parse_rows(table, lambda t: _parse_ball(t, n_frames), skipped)
+
+
+def _parse_ball(table: CsvTable, n_frames: int | None) -> BallTrack:
     frame = _frames(table, n_frames)
     visibility = table.ints("visibility")
     table.check(
@@ -75,12 +85,12 @@ def read_ball_csv(path: str | Path, *, n_frames: int | None = None) -> BallTrack
     xy[~visible] = np.nan
     xy = table.unit_coords(xy, ("x", "y"))
     order = np.argsort(frame, kind="stable")
-    return BallTrack(frame[order], visibility[order], xy[order])
+    return BallTrack(frame[order], visibility[order], xy[order], _extra(table, BALL_COLUMNS, order))
 
 
 def write_ball_csv(path: str | Path, track: BallTrack) -> Path:
-    """Write ``track`` to ``ball.csv`` atomically (x,y empty where visibility is 0)."""
-    return write_csv(
+    """Write ``track`` to ``ball.csv`` atomically (x,y empty where visibility is 0; extra columns last)."""
+    return _write_with_extra(
         path,
         BALL_COLUMNS,
         [
@@ -89,13 +99,29 @@ def write_ball_csv(path: str | Path, track: BallTrack) -> Path:
             format_floats(track.xy[:, 0], UNIT_DECIMALS),
             format_floats(track.xy[:, 1], UNIT_DECIMALS),
         ],
+        track.extra,
     )
 
 
+def _extra(table: CsvTable, known, order: np.ndarray) -> dict[str, np.ndarray]:
+    """The file's unknown columns (text), rows in ``order``."""
+    return {c: np.asarray(v, dtype=str).reshape(-1)[order] for c, v in table.extra_columns(known).items()}
+
+
+def _write_with_extra(path, header, columns, extra: dict[str, np.ndarray]) -> Path:
+    return write_csv(path, [*header, *extra], [*columns, *(np.asarray(v, str).tolist() for v in extra.values())])
+
+
 # ------------------------------------------------------------------------------- inactive_balls.csv
-def read_inactive_balls_csv(path: str | Path, *, n_frames: int | None = None) -> InactiveBalls:
+def read_inactive_balls_csv(
+    path: str | Path, *, n_frames: int | None = None, skipped: list[FormatError] | None = None
+) -> InactiveBalls:
     """Read ``inactive_balls.csv`` (``frame,ball_no,x,y``), sorted by ``(frame, ball_no)``."""
-    table = CsvTable.read(path, INACTIVE_BALLS_COLUMNS)
+    table = CsvTable.read(path, INACTIVE_BALLS_COLUMNS, skipped=skipped)
+    return parse_rows(table, lambda t: _parse_inactive(t, n_frames), skipped)
+
+
+def _parse_inactive(table: CsvTable, n_frames: int | None) -> InactiveBalls:
     frame = _frames(table, n_frames, unique=False)
     ball_no = table.ints("ball_no")
     table.check(
@@ -108,12 +134,12 @@ def read_inactive_balls_csv(path: str | Path, *, n_frames: int | None = None) ->
     )
     xy = table.unit_coords(_unit_xy(table), ("x", "y"))
     order = np.lexsort((ball_no, frame))
-    return InactiveBalls(frame[order], ball_no[order], xy[order])
+    return InactiveBalls(frame[order], ball_no[order], xy[order], _extra(table, INACTIVE_BALLS_COLUMNS, order))
 
 
 def write_inactive_balls_csv(path: str | Path, balls: InactiveBalls) -> Path:
     """Write ``balls`` to ``inactive_balls.csv`` atomically."""
-    return write_csv(
+    return _write_with_extra(
         path,
         INACTIVE_BALLS_COLUMNS,
         [
@@ -122,24 +148,42 @@ def write_inactive_balls_csv(path: str | Path, balls: InactiveBalls) -> Path:
             format_floats(balls.xy[:, 0], UNIT_DECIMALS),
             format_floats(balls.xy[:, 1], UNIT_DECIMALS),
         ],
+        balls.extra,
     )
 
 
 # --------------------------------------------------------------------------------------- events.csv
-def read_events_csv(path: str | Path, *, n_frames: int | None = None) -> HitEvents:
-    """Read ``events.csv`` (``frame,event``); labels must be from ``EVENT_LABELS``.
+def read_events_csv(
+    path: str | Path,
+    *,
+    n_frames: int | None = None,
+    labels: Sequence[str] | None = None,
+    skipped: list[FormatError] | None = None,
+) -> HitEvents:
+    """Read ``events.csv`` (``frame,event``).
 
     Events on one frame are kept: the later row moves to the next free frame (see
     :func:`separate_same_frame`), with a warning.
+
+    Args:
+        labels: the event labels allowed for the clip's court (its surfaces and the players); default: any
+            label of ``EVENT_LABELS``. A tennis clip has no walls, so ``wall_left`` is an error there.
+        skipped: when a list is given, bad rows are left out (their errors appended) instead of failing.
     """
-    table = CsvTable.read(path, EVENTS_COLUMNS)
+    allowed = tuple(EVENT_LABELS if labels is None else labels)
+    table = CsvTable.read(path, EVENTS_COLUMNS, skipped=skipped)
+    return parse_rows(table, lambda t: _parse_events(t, n_frames, allowed, path), skipped)
+
+
+def _parse_events(table: CsvTable, n_frames: int | None, allowed: tuple[str, ...], path) -> HitEvents:
     frame = _frames(table, n_frames, unique=False)
-    event = table.choices("event", EVENT_LABELS)
-    frame, event, moved = separate_same_frame(frame, event, n_frames)
+    event = table.choices("event", allowed)
+    order = np.argsort(frame, kind="stable")
+    frame, event, moved = separate_same_frame(frame[order], event[order], n_frames)
     if moved:
         warnings.warn(f"{path}: events on one frame moved to the next free frame: {'; '.join(moved[:5])}"
-                      + (f" (+{len(moved) - 5} more)" if len(moved) > 5 else ""), stacklevel=2)
-    return HitEvents(frame, event)
+                      + (f" (+{len(moved) - 5} more)" if len(moved) > 5 else ""), stacklevel=3)
+    return HitEvents(frame, event, _extra(table, EVENTS_COLUMNS, order))
 
 
 def separate_same_frame(frame: np.ndarray, event: np.ndarray,
@@ -172,19 +216,30 @@ def separate_same_frame(frame: np.ndarray, event: np.ndarray,
 
 def write_events_csv(path: str | Path, events: HitEvents) -> Path:
     """Write ``events`` to ``events.csv`` atomically."""
-    return write_csv(path, EVENTS_COLUMNS, [format_ints(events.frame), events.event.tolist()])
+    return _write_with_extra(path, EVENTS_COLUMNS, [format_ints(events.frame), events.event.tolist()], events.extra)
 
 
 # --------------------------------------------------------------------------------- court_points.csv
-def read_court_points_csv(path: str | Path, *, known_names: Iterable[str] | None = None) -> CourtPoints:
+def read_court_points_csv(
+    path: str | Path,
+    *,
+    known_names: Iterable[str] | None = None,
+    skipped: list[FormatError] | None = None,
+) -> CourtPoints:
     """Read ``court_points.csv`` (``name,x,y``).
 
     Args:
         path: the file.
         known_names: the point names of the court YAML; other names are rejected (with the closest
             valid name as a hint). None accepts any name.
+        skipped: when a list is given, bad rows are left out (their errors appended) instead of failing.
     """
-    table = CsvTable.read(path, COURT_POINTS_COLUMNS)
+    known = None if known_names is None else list(known_names)
+    table = CsvTable.read(path, COURT_POINTS_COLUMNS, skipped=skipped)
+    return parse_rows(table, lambda t: _parse_court_points(t, known), skipped)
+
+
+def _parse_court_points(table: CsvTable, known: list[str] | None) -> CourtPoints:
     names = table.strings("name")
     table.check(
         np.array([not n for n in names], dtype=bool), "empty point name", fix="write the court point's name"
@@ -194,10 +249,10 @@ def read_court_points_csv(path: str | Path, *, known_names: Iterable[str] | None
         lambda i: f"duplicate point {names[i]!r}",
         fix="keep one row per court point",
     )
-    if known_names is not None:
-        _check_known_names(table, names, list(known_names))
+    if known is not None:
+        _check_known_names(table, names, known)
     xy = table.unit_coords(_unit_xy(table), ("x", "y"))
-    return CourtPoints(names, xy)
+    return CourtPoints(names, xy, _extra(table, COURT_POINTS_COLUMNS, np.arange(len(table))))
 
 
 def _check_known_names(table: CsvTable, names: list[str], known: list[str]) -> None:
@@ -216,7 +271,7 @@ def _check_known_names(table: CsvTable, names: list[str], known: list[str]) -> N
 
 def write_court_points_csv(path: str | Path, points: CourtPoints) -> Path:
     """Write ``points`` to ``court_points.csv`` atomically, in their order."""
-    return write_csv(
+    return _write_with_extra(
         path,
         COURT_POINTS_COLUMNS,
         [
@@ -224,6 +279,7 @@ def write_court_points_csv(path: str | Path, points: CourtPoints) -> Path:
             format_floats(points.xy[:, 0], UNIT_DECIMALS),
             format_floats(points.xy[:, 1], UNIT_DECIMALS),
         ],
+        points.extra,
     )
 
 

@@ -12,12 +12,15 @@ import difflib
 import io
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
 from .atomic import atomic_write_text
 from .errors import FormatError
 from .tables import UNIT_TOLERANCE
+
+T = TypeVar("T")
 
 
 def closest(name: str, choices: Iterable[str]) -> str | None:
@@ -64,6 +67,7 @@ class CsvTable:
         optional: Sequence[str] = (),
         ignore_case: bool = False,
         allow_empty: bool = True,
+        skipped: list[FormatError] | None = None,
     ) -> CsvTable:
         """Parse ``path`` and check that its header holds every name of ``columns``.
 
@@ -74,6 +78,8 @@ class CsvTable:
             ignore_case: match column names case-insensitively (for outside formats); the names of
                 the returned table are then those of ``columns``/``optional``.
             allow_empty: accept a file with a header and no data rows.
+            skipped: when a list is given, rows with the wrong number of fields are dropped (their errors
+                appended to it) instead of failing the whole file.
         """
         path = Path(path)
         text = read_text(path)
@@ -89,22 +95,44 @@ class CsvTable:
         header = _match_header(path, header, columns, optional, ignore_case, header_line)
         rows = [row for _, row in records[1:]]
         lines = [line for line, _ in records[1:]]
+        header, rows = _drop_unnamed_columns(path, header, rows, header_line)
         table = cls(path, header, rows, lines)
-        table._check_field_counts()
+        table._check_field_counts(skipped)
         if not rows and not allow_empty:
             raise FormatError(path, "no data rows", line=2, fix="add at least one data row")
         return table
 
-    def _check_field_counts(self) -> None:
+    def _check_field_counts(self, skipped: list[FormatError] | None = None) -> None:
         width = len(self.header)
         bad = [i for i, row in enumerate(self._rows) if len(row) != width]
-        if bad:
-            i = bad[0]
-            raise self.error(
+        errors = [
+            self.error(
                 i,
                 f"{len(self._rows[i])} fields, but the header has {width}",
                 fix=f"write exactly {width} comma-separated values: {','.join(self.header)}",
             )
+            for i in bad[: 1 if skipped is None else None]
+        ]
+        if errors and skipped is None:
+            raise errors[0]
+        if errors:
+            skipped.extend(errors)
+            keep = sorted(set(range(len(self._rows))) - set(bad))
+            self._rows = [self._rows[i] for i in keep]
+            self.lines = self.lines[keep]
+
+    def without_line(self, line: int) -> CsvTable:
+        """A copy without the data row at 1-based file ``line`` (KeyError when no row starts there)."""
+        hits = np.flatnonzero(self.lines == line)
+        if not hits.size:
+            raise KeyError(line)
+        i = int(hits[0])
+        return CsvTable(self.path, self.header, self._rows[:i] + self._rows[i + 1 :],
+                        [int(v) for v in np.delete(self.lines, i)])
+
+    def extra_columns(self, known: Sequence[str]) -> dict[str, list[str]]:
+        """The text of every column not in ``known``, ``{name: one string per row}``, in file order."""
+        return {c: self.strings(c) for c in self.header if c not in known}
 
     # -------------------------------------------------------------------------------------- columns
     def __len__(self) -> int:
@@ -162,6 +190,11 @@ class CsvTable:
             values != np.round(values),
             lambda i: f"{column} is not an integer: {values[i]:g}",
             fix=f"write a whole number in column {column}",
+        )
+        self.check(
+            np.abs(values) > 2**53,
+            lambda i: f"{column} is too large: {values[i]:g}",
+            fix=f"write a whole number below 2^53 in column {column}",
         )
         return values.astype(np.int64)
 
@@ -221,6 +254,37 @@ class CsvTable:
         return np.clip(xy, 0.0, 1.0)
 
 
+def parse_rows(table: CsvTable, parse: Callable[[CsvTable], T], skipped: list[FormatError] | None = None) -> T:
+    """``parse(table)``; with a ``skipped`` list, a row that fails a check is dropped (its error appended to
+    ``skipped``) and the rest parsed again, so one bad row does not lose the file. Header errors still raise."""
+    while True:
+        try:
+            return parse(table)
+        except FormatError as err:
+            if skipped is None or err.line is None:
+                raise
+            try:
+                table = table.without_line(err.line)
+            except KeyError:
+                raise err from None
+            skipped.append(err)
+
+
+def _drop_unnamed_columns(
+    path: Path, header: list[str], rows: list[list[str]], line: int
+) -> tuple[list[str], list[list[str]]]:
+    """Drop columns without a name (a trailing comma, as spreadsheets write) when they hold nothing."""
+    unnamed = [i for i, name in enumerate(header) if name == ""]
+    if not unnamed:
+        return header, rows
+    for row in rows:
+        if any(i < len(row) and row[i].strip() for i in unnamed):
+            raise FormatError(path, f"column {unnamed[0] + 1} has no name but holds values", line=line,
+                              fix="give every column a name in the header")
+    keep = [i for i in range(len(header)) if i not in unnamed]
+    return [header[i] for i in keep], [[row[i] for i in keep if i < len(row)] + row[len(header):] for row in rows]
+
+
 def _match_header(
     path: Path,
     header: list[str],
@@ -244,6 +308,15 @@ def _match_header(
         unknown = [name for name in header if name not in known]
         hints = [f"rename {u!r} to {m!r}" for m in missing if (u := closest(m, unknown))]
         fix = "; ".join(hints) if hints else f"the header must be: {','.join(columns)}"
+        separator = next((sep for sep in (";", "\t", "|") if len(header) == 1 and sep in header[0]), None)
+        if separator is not None:
+            name = {"\t": "tabs"}.get(separator, repr(separator))
+            raise FormatError(
+                path,
+                f"the columns are separated by {name}, not commas",
+                line=line,
+                fix=f"save it as comma-separated CSV (header: {','.join(columns)})",
+            )
         raise FormatError(
             path,
             f"missing column(s) {missing}; expected {','.join(known)}, found {','.join(header) or '(none)'}",

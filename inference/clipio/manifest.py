@@ -22,8 +22,8 @@ from pathlib import Path
 import yaml
 
 from .atomic import atomic_write_text
-from .csvtable import read_text
 from .errors import FormatError
+from .structured import load_yaml
 
 SPLITS = ("train", "val", "test")
 
@@ -77,10 +77,7 @@ class Manifest:
         path = Path(path)
         if path.is_dir():
             path = path / "manifest.yaml"
-        try:
-            data = yaml.safe_load(read_text(path))
-        except yaml.YAMLError as e:
-            raise FormatError(path, f"not valid YAML ({e})") from None
+        data = load_yaml(path, fix="see datasets/README.md for the manifest layout")
         if not isinstance(data, dict) or not isinstance(data.get("clips"), list):
             raise FormatError(path, "needs a `clips:` list of {path, split}",
                               fix="see datasets/README.md for the manifest layout")

@@ -102,6 +102,19 @@ def clip_unit(xy: np.ndarray, name: str, *, allow_nan: bool = False) -> np.ndarr
     return np.clip(xy, 0.0, 1.0)
 
 
+def as_extra(extra, n: int, reserved) -> dict[str, np.ndarray]:
+    """Unknown columns of a file, ``{name: (n,) str}``: kept on a round trip (a hand-added ``note`` column)."""
+    if not isinstance(extra, dict):
+        raise ValueError("extra must be a dict {column name: (N,) values}")
+    out = {}
+    for k, v in extra.items():
+        name = str(k)
+        if not name or name in reserved:
+            raise ValueError(f"extra column name {name!r} is empty or a known column")
+        out[name] = as_strings(list(np.asarray(v, dtype=str).reshape(-1)), f"extra[{name!r}]", n)
+    return out
+
+
 def _check_labels(values: np.ndarray, allowed: tuple[str, ...], name: str) -> None:
     unknown = sorted(set(values.tolist()) - set(allowed))
     if unknown:
@@ -158,6 +171,7 @@ class BallTrack(ArraysEqualMixin):
         visibility: ``(N,) int8``, 0 not in frame, 1 visible, 2 hard to see, 3 occluded.
         xy: ``(N, 2) float64``, normalised image coordinates ``(u, v)`` in ``[0, 1]``; NaN exactly
             where ``visibility == 0``.
+        extra: unknown columns of the file, ``{name: (N,) str}``, written back unchanged.
 
     Examples:
         >>> t = BallTrack(frame=[0, 1], visibility=[1, 0], xy=[[0.5, 0.25], [np.nan, np.nan]])
@@ -168,10 +182,12 @@ class BallTrack(ArraysEqualMixin):
     frame: np.ndarray
     visibility: np.ndarray
     xy: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.frame = as_vector(self.frame, "frame", np.int64)
         n = len(self.frame)
+        self.extra = as_extra(self.extra, n, ("frame", "visibility", "x", "y"))
         visibility = as_vector(self.visibility, "visibility", np.int64, n)
         if visibility.size and (visibility.min() < 0 or visibility.max() > 3):
             raise ValueError("visibility must be in 0..3")
@@ -238,15 +254,18 @@ class InactiveBalls(ArraysEqualMixin):
         ball_no: ``(N,) int64``, ``>= 0``, which still ball; ``(frame, ball_no)`` pairs are unique and
             sorted.
         xy: ``(N, 2) float64``, normalised image coordinates in ``[0, 1]``.
+        extra: unknown columns of the file, ``{name: (N,) str}``, written back unchanged.
     """
 
     frame: np.ndarray
     ball_no: np.ndarray
     xy: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.frame = as_vector(self.frame, "frame", np.int64)
         n = len(self.frame)
+        self.extra = as_extra(self.extra, n, ("frame", "ball_no", "x", "y"))
         self.ball_no = as_vector(self.ball_no, "ball_no", np.int64, n)
         self.xy = clip_unit(as_matrix(self.xy, "xy", n, 2), "xy")
         check_frames(self.frame, strict=False)
@@ -273,6 +292,7 @@ class HitEvents(ArraysEqualMixin):
     Attributes:
         frame: ``(N,) int64``, zero-based frame indices, strictly increasing.
         event: ``(N,) str``, labels from :data:`EVENT_LABELS`.
+        extra: unknown columns of the file, ``{name: (N,) str}``, written back unchanged.
 
     Examples:
         >>> HitEvents(frame=[3, 9], event=["player_near", "ground"]).at(9)
@@ -281,10 +301,12 @@ class HitEvents(ArraysEqualMixin):
 
     frame: np.ndarray
     event: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.frame = as_vector(self.frame, "frame", np.int64)
         self.event = as_strings(self.event, "event", len(self.frame))
+        self.extra = as_extra(self.extra, len(self.frame), ("frame", "event"))
         check_frames(self.frame)
         _check_labels(self.event, EVENT_LABELS, "event")
 
@@ -310,13 +332,16 @@ class CourtPoints(ArraysEqualMixin):
     Attributes:
         names: ``N`` unique point names of the court YAML.
         xy: ``(N, 2) float64``, normalised image coordinates in ``[0, 1]``.
+        extra: unknown columns of the file, ``{name: (N,) str}``, written back unchanged.
     """
 
     names: list[str]
     xy: np.ndarray
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.names = [str(name) for name in self.names]
+        self.extra = as_extra(self.extra, len(self.names), ("name", "x", "y"))
         if any(not name for name in self.names):
             raise ValueError("names must be non-empty strings")
         if len(set(self.names)) != len(self.names):

@@ -7,7 +7,9 @@
   (``court_points.csv``, ``camera.yaml``) copied, but *not* the annotations — so the original can serve as the
   reference the results are scored against.
 
-``--camera`` and ``--court-points`` files are copied in after checking that they fit the video.
+``--camera`` and ``--court-points`` files are copied in after checking that they fit the video; a different
+``camera.yaml`` / ``court_points.csv`` already in the clip (clicked by hand) is first copied to
+``.rally3d/backup/`` and the command says so.
 
 With ``--start``/``--end`` (seconds), the stretch of a long video is re-encoded into the new clip folder's
 ``video.mp4`` (H.264, CRF 18) and ``clip.yaml`` records where it came from (``cut:``); a re-run with the same
@@ -180,27 +182,29 @@ def _new_clip(out: Path, info: ClipInfo, video: Path) -> Clip:
     return Clip.create(out, new, exist_ok=True)
 
 
-def _install_camera(clip: Clip, path: Path) -> None:
+def _install_camera(clip: Clip, path: Path, log=print) -> None:
     cam = Camera.load(path)  # clear FormatError on a malformed file
-    check_camera_size(cam, clip, path)
+    clip.check_camera(cam, path)
     if path.resolve() != clip.camera_path.resolve():
+        _backup_replaced(clip, clip.camera_path, path, log)
         clip.write_camera(cam)
 
 
-def _install_court_points(clip: Clip, path: Path) -> None:
+def _install_court_points(clip: Clip, path: Path, log=print) -> None:
     if path.resolve() == clip.court_points_path.resolve():
         return
     from inference.clipio import read_court_points_csv
 
-    clip.write_court_points(read_court_points_csv(path))
+    points = read_court_points_csv(path)
+    _backup_replaced(clip, clip.court_points_path, path, log)
+    clip.write_court_points(points)
 
 
-def check_camera_size(cam: Camera, clip: Clip, path: Path | None = None) -> None:
-    """Refuse a calibration made for another frame size (the projection would be wrong everywhere)."""
-    size = tuple(int(v) for v in cam.image_size)
-    if size != (clip.info.width, clip.info.height):
-        raise FormatError(path or clip.camera_path,
-                          f"the calibration is for {size[0]}×{size[1]} frames but the video is "
-                          f"{clip.info.width}×{clip.info.height}",
-                          fix="calibrate this video (court_points.csv + rally3d calibrate) or pass the right "
-                              "--camera")
+def _backup_replaced(clip: Clip, target: Path, source: Path, log) -> None:
+    """Before ``source`` replaces the clip's ``target`` (a hand-made file), keep a copy and say so."""
+    if not target.is_file() or target.read_bytes() == source.read_bytes():
+        return
+    from .state import backup_file
+
+    copy = backup_file(clip.root, target)
+    log(f"rally3d infer: {target} is replaced by {source}; the previous {target.name} is kept in {copy}")

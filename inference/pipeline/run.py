@@ -6,7 +6,6 @@ Example:
 """
 from __future__ import annotations
 
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +14,7 @@ from inference.clipio import Clip, FormatError
 from inference.court import load_court
 
 from .stages import Context, Outcome, PipelineConfig, Skip, Stage, StageError, build_stages
-from .state import STATE_DIR, RunState, stage_key
+from .state import STATE_DIR, RunState, backup_file, stage_key
 
 # the errors a stage reports as a failure of that stage (bad input), not as a crash of the program
 STAGE_ERRORS = (StageError, FormatError, FileNotFoundError, ValueError, RuntimeError)
@@ -76,9 +75,7 @@ def _guard_outputs(stage: Stage, ctx: Context, outputs: list[Path]) -> None:
             raise StageError(f"{path} exists and was not written by rally3d infer (hand annotations?) — pass "
                              "--out DIR to write the results elsewhere, or --overwrite to replace it "
                              f"(a backup is kept in {STATE_DIR}/backup/)")
-        backup = ctx.clip.root / STATE_DIR / "backup"
-        backup.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(path, backup / f"{path.name}.{time.strftime('%Y%m%d-%H%M%S')}")
+        backup_file(ctx.clip.root, path)
 
 
 def run_pipeline(clip: Clip, cfg: PipelineConfig | None = None, only: set[str] | None = None,

@@ -116,11 +116,9 @@ def _camera_inputs(ctx: Context) -> dict[str, Path | None]:
 def _camera_run(ctx: Context) -> Outcome:
     from inference.calibration import calibrate_court
 
-    from .prepare import check_camera_size
-
     clip = ctx.clip
     if ctx.given_camera():
-        check_camera_size(clip.read_camera(), clip)
+        clip.check_camera(clip.read_camera())
         return Outcome(note="camera.yaml given" + _drift_note(ctx))
     if clip.court_points_path.is_file():
         points = clip.read_court_points(known_names=ctx.court.point_names)

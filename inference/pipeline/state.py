@@ -11,7 +11,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+from inference.clipio import atomic
 from inference.clipio.atomic import atomic_write_text
+from inference.clipio.errors import FormatError
+from inference.clipio.structured import load_json
 
 STATE_DIR = ".rally3d"
 STATE_FILE = "pipeline.json"
@@ -37,6 +40,11 @@ def fingerprint(path: Path) -> str | None:
     return _HASHES[key]
 
 
+def backup_file(clip_root: Path, path: Path) -> Path:
+    """Copy ``path`` into ``<clip>/.rally3d/backup/<name>.<timestamp>`` (before it is replaced); the copy's path."""
+    return atomic.backup_file(path, Path(clip_root) / STATE_DIR / "backup")
+
+
 def stage_key(inputs: dict[str, Path | None], params: dict[str, Any]) -> str:
     """Key of one stage run: fingerprints of its inputs (by role) and its parameters."""
     blob = json.dumps({"inputs": {k: fingerprint(p) if p is not None else None for k, p in sorted(inputs.items())},
@@ -53,8 +61,9 @@ class RunState:
         self.stages: dict[str, dict[str, Any]] = {}
         if self.path.is_file():
             try:
-                self.stages = json.loads(self.path.read_text()).get("stages", {})
-            except (json.JSONDecodeError, AttributeError):
+                stages = load_json(self.path).get("stages", {})
+                self.stages = {k: v for k, v in stages.items() if isinstance(v, dict)}
+            except (FormatError, AttributeError):
                 self.stages = {}  # a damaged record only costs a re-run
 
     def is_current(self, stage: str, key: str, outputs: list[Path]) -> bool:

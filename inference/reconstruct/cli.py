@@ -30,7 +30,9 @@ def run_reconstruct(args: argparse.Namespace) -> int:
     from .observations import Observations
 
     clip = Clip(args.clip)
-    obs = Observations.from_clip(clip, camera=clip.read_camera(gt=args.gt_camera))
+    camera = clip.read_camera(gt=args.gt_camera)
+    clip.check_camera(camera, clip.root / ("gt" if args.gt_camera else "") / "camera.yaml")
+    obs = Observations.from_clip(clip, camera=camera)
     if not len(obs.event_frames):
         raise ValueError(f"{clip.events_path}: needs at least one event (a bounce or a hit) to anchor the flight")
     fit = reconstruct(obs, args.method)

@@ -26,7 +26,8 @@ def populate_assist(gui, view) -> AssistPanel:
     start = gui.add_number("from frame", 0, min=0, max=n - 1, step=1)
     stop = gui.add_number("to frame", n - 1, min=0, max=n - 1, step=1)
     accept = gui.add_button_group("proposals in range", ["accept", "accept (overwrite)", "reject"])
-    events = gui.add_button_group("hit events", ["propose events", "accept events"])
+    uncertain = gui.add_button("next uncertain frame (U)")
+    events = gui.add_button_group("hit events", ["propose events", "next (P)", "accept here (V)", "accept all"])
 
     run.on_click(lambda ev: view.run_detector(weights.value.strip() or None))
 
@@ -38,5 +39,18 @@ def populate_assist(gui, view) -> AssistPanel:
             view.accept_range(a, b, overwrite=accept.value.endswith("(overwrite)"))
 
     accept.on_click(on_accept)
-    events.on_click(lambda ev: view.propose_events() if events.value.startswith("propose") else view.accept_events())
+    uncertain.on_click(lambda ev: view.next_uncertain())
+
+    def on_events(ev) -> None:
+        v = events.value
+        if v.startswith("propose"):
+            view.propose_events()
+        elif v.startswith("next"):
+            view.jump_proposed_event()
+        elif v.startswith("accept here"):
+            view.accept_event_here()
+        else:
+            view.accept_events()
+
+    events.on_click(on_events)
     return AssistPanel(weights, run, progress, info, start, stop, accept, events)

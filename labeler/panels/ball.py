@@ -12,14 +12,21 @@ class BallPanel:
     method: Any
     proposals: Any
     trail: Any
+    max_gap: Any
+    follow: Any
+    zoom: Any
 
 
 def populate_ball(gui, view) -> BallPanel:
     info = gui.add_markdown("")
     visibility = gui.add_button_group("ball", ["hard (H)", "occl. (O)", "out (X)", "clear (⌫)"])
     method = gui.add_dropdown("interpolation", ("physics", "linear"), initial_value="physics")
-    proposals = gui.add_button_group("proposals", ["interp. (I)", "accept (Y)", "accept all", "reject"])
+    max_gap = gui.add_number("max gap (frames)", view.session.max_gap, min=2, max=view.session.n_frames, step=1,
+                             hint="interpolation never fills a longer gap between keyframes (nor across an event)")
+    proposals = gui.add_button_group("proposals", ["interp. (I)", "accept (Y)", "flight (⇧Y)", "reject"])
     trail = gui.add_slider("trail frames", 0, 60, 1, 15)
+    follow = gui.add_checkbox("follow the ball (G)", False, hint="keep the ball centred, zoomed in")
+    zoom = gui.add_slider("follow zoom", 1.0, 8.0, 0.5, 3.0)
 
     def on_visibility(ev) -> None:
         v = visibility.value
@@ -34,12 +41,14 @@ def populate_ball(gui, view) -> BallPanel:
             view.interpolate()
         elif v.startswith("accept ("):
             view.accept_here()
-        elif v == "accept all":
-            view.accept_range(None, None)
+        elif v.startswith("flight"):
+            view.accept_flight()
         else:
             view.reject_proposals()
 
     visibility.on_click(on_visibility)
     proposals.on_click(on_proposals)
     trail.on_update(lambda ev: view.request(overlay=True))
-    return BallPanel(info, visibility, method, proposals, trail)
+    follow.on_update(lambda ev: view.follow != bool(follow.value) and view.toggle_follow())
+    zoom.on_update(lambda ev: view.request(overlay=True))
+    return BallPanel(info, visibility, method, proposals, trail, max_gap, follow, zoom)

@@ -36,8 +36,8 @@ from .playback import Playback
 from .scene import TRAIL_FRAMES, PlayerNodes, add_ball, apply_pose, camera_presets, update_ball
 from .shots import shots_csv_text
 
-VIDEO_WIDTH = 640
-"""Width (px) of the video frame shown in the panel."""
+VIDEO_WIDTH = 960
+"""Width (px) of the video frame sent to the page (the panel beside the 3D view scales it to its width)."""
 
 
 class FrameImages:
@@ -101,6 +101,7 @@ class Session:
         self.info = populate_info(gui, app.frames.get(self.playback.frame), d.analysis, d.summary())
         self.dl_replay, self.dl_csv = populate_export(gui)
         self._syncing = False
+        self.shown = -1  # the frame whose ball and video were last sent together
         self._wire()
         apply_pose(client, self.presets["broadcast"])
         self.render()
@@ -175,10 +176,13 @@ class Session:
         """Show the current frame: ball, trail, players, video overlay, shot text, slider position."""
         d = self.app.data
         f = self.playback.frame
+        image = self.app.frames.get(f)  # decoded before the batch: 3D and video leave together
         with self.client.atomic():
             update_ball(self.nodes, d.ball_at(f), d.trail(f, TRAIL_FRAMES))
             self.players.update(d.players_at(f))
-        self.info.video.image = self.app.frames.get(f)
+            self.info.video.image = image
+            self.info.frame.content = f"**frame {f}** (3D view and video)"
+            self.shown = f
         self.info.current.content = current_shot_markdown(d.analysis, f)
         if not from_slider:
             self._syncing = True

@@ -48,20 +48,30 @@ def _fmt(v: float, unit: str, nd: int = 0) -> str:
     return "–" if v is None or not math.isfinite(v) else f"{v:.{nd}f} {unit}"
 
 
-def shot_line(s: Shot) -> str:
-    """One markdown table row of a shot."""
+SHOT_COLUMNS = ("#", "shot", "speed", "net", "bounce (m)", "call", "line")
+"""Headers of the per-shot table (GUI Markdown and the exported replay.html)."""
+
+
+def shot_cells(s: Shot) -> tuple[str, ...]:
+    """One shot's cells of the table (:data:`SHOT_COLUMNS`), plain text."""
     b = s.first_bounce
     bounce = "–" if b is None or not np.isfinite(b.xy).all() else f"({b.xy[0]:.2f}, {b.xy[1]:.2f})"
     dist = "–" if b is None or not math.isfinite(b.distance_cm) else f"{b.distance_cm:+.0f} cm {b.line}"
     kind = "serve" if s.serve else "shot"
-    return (f"| {s.index} | {s.team} {kind} @{s.hit.frame} | {_fmt(s.launch_speed_kmh, 'km/h')} | "
-            f"{_fmt(s.net_clearance_m, 'm', 2)} | {bounce} | **{s.verdict}** | {dist} |")
+    return (str(s.index), f"{s.team} {kind} @{s.hit.frame}", _fmt(s.launch_speed_kmh, "km/h"),
+            _fmt(s.net_clearance_m, "m", 2), bounce, s.verdict, dist)
+
+
+def shot_line(s: Shot) -> str:
+    """One markdown table row of a shot (the call in bold)."""
+    cells = list(shot_cells(s))
+    cells[5] = f"**{cells[5]}**"
+    return "| " + " | ".join(cells) + " |"
 
 
 def shots_markdown(analysis: RallyAnalysis) -> str:
     """The per-shot table: speed, net clearance, first bounce, call and distance to the nearest line."""
-    head = ("| # | shot | speed | net | bounce (m) | call | line |\n"
-            "|---|---|---|---|---|---|---|\n")
+    head = "| " + " | ".join(SHOT_COLUMNS) + " |\n" + "|---" * len(SHOT_COLUMNS) + "|\n"
     return head + "\n".join(shot_line(s) for s in analysis.shots) if analysis.shots else "No racket hits in events.csv."
 
 
@@ -82,16 +92,26 @@ def current_shot_markdown(analysis: RallyAnalysis, frame: int) -> str:
     return "\n".join(lines)
 
 
+VIDEO_PANEL_WIDTH = 640
+"""Width (px) of the video panel docked at the left edge of the page, beside the 3D view."""
+
+
 @dataclass
 class InfoPanel:
     video: object
+    frame: object
     current: object
     table: object
 
 
 def populate_info(gui, first_image: np.ndarray, analysis: RallyAnalysis, summary: dict) -> InfoPanel:
-    with gui.add_folder("Video (reprojected ball and court)"):
+    """The video (with the reprojection, in a panel docked left of the 3D view) and the shot panel."""
+    video_panel = gui.add_panel()
+    with video_panel.add_tab("Video (reprojection drawn)"):
+        frame = gui.add_markdown("")
         video = gui.add_image(first_image, format="jpeg", jpeg_quality=80)
+    video_panel.dock_left()
+    video_panel.set_width(VIDEO_PANEL_WIDTH)
     with gui.add_folder("Shots"):
         current = gui.add_markdown("")
         table = gui.add_markdown(shots_markdown(analysis))
@@ -99,7 +119,7 @@ def populate_info(gui, first_image: np.ndarray, analysis: RallyAnalysis, summary
         gui.add_markdown(f"{summary['shots']} shots, {summary['reconstructed']} reconstructed frames"
                          + (f", reprojection RMS {rms} px" if rms is not None else "")
                          + (f", method {summary['method']}" if summary.get("method") else ""))
-    return InfoPanel(video, current, table)
+    return InfoPanel(video, frame, current, table)
 
 
 def populate_export(gui) -> tuple[object, object]:

@@ -115,16 +115,86 @@ def add_full_path(scene, traj_xyz: np.ndarray, name: str = "/path") -> None:
         scene.add_line_segments(name, segs, (235, 235, 200), thickness=0.015)
 
 
-def add_contacts(scene, analysis, ball_radius: float, root: str = "/contacts") -> None:
-    """Markers at every hit, bounce and wall contact, labelled (bounces with their call and distance)."""
+LABEL_CHAR_PX, LABEL_LINE_PX = 8.0, 22.0
+"""Generous size of one character and of one line of a contact label on screen (px), for :func:`spread_labels`."""
+LABEL_STEP_M = 0.3
+"""How far a label is raised (m) each time it would cover another one."""
+
+
+@dataclass(frozen=True)
+class ContactLabel:
+    """One label of the contact markers: its text, the 3D point it belongs to (3,) and its lift above it (m)."""
+
+    name: str
+    text: str
+    anchor: np.ndarray
+    lift: float
+
+
+def spread_labels(anchors: np.ndarray, texts: list[str], project, *, base_lift: float = 0.2,
+                  max_steps: int = 16) -> np.ndarray:
+    """Lifts (N,) above ``anchors (N, 3)`` such that no two labels overlap on screen.
+
+    ``project((K, 3)) -> (K, 2)`` pixels (e.g. the clip camera, the review's broadcast view). Labels are placed
+    in order; each one is raised by :data:`LABEL_STEP_M` while its box (``len(text)`` ×
+    :data:`LABEL_CHAR_PX` wide, :data:`LABEL_LINE_PX` high, bottom-centred) meets a box placed before it.
+    """
+    anchors = np.asarray(anchors, float).reshape(-1, 3)
+    lifts = np.full(len(anchors), float(base_lift))
+    boxes: list[tuple[float, float, float, float]] = []
+    for i, (p, text) in enumerate(zip(anchors, texts)):
+        half = 0.5 * LABEL_CHAR_PX * max(len(text), 1)
+        for _ in range(max_steps):
+            u, v = np.asarray(project((p + (0.0, 0.0, lifts[i]))[None]), float).reshape(2)
+            box = (u - half, v - LABEL_LINE_PX, u + half, v)
+            if not np.isfinite(box).all() or not any(
+                    box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in boxes):
+                break
+            lifts[i] += LABEL_STEP_M
+        if np.isfinite(box).all():
+            boxes.append(box)
+    return lifts
+
+
+def contact_labels(analysis, project=None) -> list[ContactLabel]:
+    """The labels of every hit, floor bounce and wall/net contact: shot number, what, figures, frame.
+
+    With ``project`` (3D → pixels of the default view) they are lifted apart so none covers another.
+    """
+    items: list[tuple[str, str, np.ndarray]] = []
+    for s in analysis.shots:
+        if s.hit.known:
+            speed = "" if not math.isfinite(s.launch_speed_kmh) else f" {s.launch_speed_kmh:.0f} km/h"
+            items.append((f"hit{s.index}", f"{s.index}: {'serve' if s.serve else 'hit'} {s.team}{speed} "
+                          f"@{s.hit.frame}", np.asarray(s.hit.position, float)))
+        calls = {b.frame: b for b in s.bounces}
+        for k, c in enumerate(s.contacts):
+            if not c.known:
+                continue
+            if c.event == "ground":
+                b = calls.get(c.frame)
+                call = b.call if b else "-"
+                txt = call if b is None or not math.isfinite(b.distance_cm) else f"{call} {b.distance_cm:+.0f} cm"
+                anchor = np.array([c.position[0], c.position[1], 0.01])
+            else:
+                txt, anchor = c.surface, np.asarray(c.position, float)
+            items.append((f"s{s.index}c{k}", f"{s.index}: {txt} @{c.frame}", anchor))
+    if not items:
+        return []
+    anchors = np.stack([a for *_, a in items])
+    texts = [t for _, t, _ in items]
+    lifts = spread_labels(anchors, texts, project) if project is not None else np.full(len(items), 0.2)
+    return [ContactLabel(n, t, a, float(h)) for (n, t, a), h in zip(items, lifts)]
+
+
+def add_contacts(scene, analysis, ball_radius: float, root: str = "/contacts", project=None) -> None:
+    """Markers at every hit, bounce and wall contact, with labels (:func:`contact_labels`) that do not overlap
+    in the view of ``project`` (3D → pixels; the clip camera)."""
     r = max(ball_radius, DISPLAY_BALL_RADIUS) * 0.8
     for s in analysis.shots:
         if s.hit.known:
-            p = s.hit.position
-            scene.add_icosphere(f"{root}/hit{s.index}", r, TEAM_RGB[s.team], position=tuple(p), subdivisions=1)
-            speed = "" if not math.isfinite(s.launch_speed_kmh) else f" {s.launch_speed_kmh:.0f} km/h"
-            scene.add_label(f"{root}/hit{s.index}/label", f"{'serve' if s.serve else 'hit'} {s.team}{speed}",
-                            position=(0, 0, 0.25), anchor="bottom-center", font_screen_scale=0.7)
+            scene.add_icosphere(f"{root}/hit{s.index}", r, TEAM_RGB[s.team], position=tuple(s.hit.position),
+                                subdivisions=1)
         calls = {b.frame: b for b in s.bounces}
         for k, c in enumerate(s.contacts):
             if not c.known:
@@ -132,15 +202,13 @@ def add_contacts(scene, analysis, ball_radius: float, root: str = "/contacts") -
             name = f"{root}/s{s.index}c{k}"
             if c.event == "ground":
                 b = calls.get(c.frame)
-                call = b.call if b else "-"
-                scene.add_cylinder(name, r * 1.6, 0.01, CALL_RGB[call], position=(c.position[0], c.position[1], 0.01))
-                txt = call if b is None or not math.isfinite(b.distance_cm) else f"{call} {b.distance_cm:+.0f} cm"
-                scene.add_label(f"{name}/label", txt, position=(0, 0, 0.15), anchor="bottom-center",
-                                font_screen_scale=0.7)
+                scene.add_cylinder(name, r * 1.6, 0.01, CALL_RGB[b.call if b else "-"],
+                                   position=(c.position[0], c.position[1], 0.01))
             else:
                 scene.add_icosphere(name, r * 0.8, SURFACE_RGB, position=tuple(c.position), subdivisions=1)
-                scene.add_label(f"{name}/label", c.surface, position=(0, 0, 0.15), anchor="bottom-center",
-                                font_screen_scale=0.6)
+    for lab in contact_labels(analysis, project):
+        scene.add_label(f"{root}/labels/{lab.name}", lab.text, position=tuple(lab.anchor + (0.0, 0.0, lab.lift)),
+                        anchor="bottom-center", font_screen_scale=0.7)
     for k, b in enumerate(analysis.pre_serve):
         if np.isfinite(b.xy).all():
             scene.add_cylinder(f"{root}/pre{k}", r * 1.6, 0.01, CALL_RGB["-"], position=(b.xy[0], b.xy[1], 0.01))

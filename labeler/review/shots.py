@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +39,7 @@ import numpy as np
 from inference.clipio import Ball3D, Clip, HitEvents
 from inference.clipio.atomic import atomic_write_text
 from inference.clipio.errors import FormatError
+from inference.clipio.structured import load_json
 from inference.court import Court, load_court
 
 HIT_EVENTS = ("player_near", "player_far")
@@ -513,11 +513,7 @@ def read_segments(path: Path) -> list[dict]:
     """segments.json's ``segments`` list ([] when the file is absent)."""
     if not path.is_file():
         return []
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise FormatError(path, f"not valid JSON ({e.msg}, line {e.lineno})",
-                          fix="re-run `rally3d reconstruct <clip>`") from None
+    data = load_json(path, fix="re-run `rally3d reconstruct <clip>`")
     segs = data.get("segments") if isinstance(data, dict) else None
     if not isinstance(segs, list):
         raise FormatError(path, "expected an object with a `segments` list", fix="re-run `rally3d reconstruct <clip>`")

@@ -118,3 +118,70 @@ def test_courts_lists_points(capsys):
 def test_missing_clip_is_a_clear_error(tmp_path, capsys):
     assert main(["calibrate", str(tmp_path / "nope")]) == 1
     assert "clip.yaml" in capsys.readouterr().err
+
+
+def test_check_opens_the_video_empty_and_truncated(sample, capsys):
+    video = sample / "video.mp4"
+    data = video.read_bytes()
+    video.write_bytes(b"")
+    assert main(["check", str(sample)]) == 1
+    assert "video.mp4: the video file is empty" in capsys.readouterr().out
+    video.write_bytes(data[: len(data) // 2])  # cut in half: the index (moov) or the last frames are lost
+    assert main(["check", str(sample)]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL" in out and "video.mp4" in out and "re-encode" in out
+    video.write_bytes(data)
+    assert main(["check", str(sample), "--full"]) == 0
+    assert "240 frames, 240 decoded" in capsys.readouterr().out
+
+
+def test_check_finds_frames_lost_at_the_end_of_a_faststart_video(tmp_path, capsys):
+    """A video whose index sits at the start (faststart) still opens when its end is cut off."""
+    import av
+
+    clip = tmp_path / "c"
+    clip.mkdir()
+    with av.open(str(clip / "video.mp4"), "w", format="mp4", options={"movflags": "faststart"}) as out:
+        stream = out.add_stream("libx264", rate=30)
+        stream.width, stream.height, stream.pix_fmt = 320, 240, "yuv420p"
+        rng = np.random.default_rng(0)
+        for _ in range(60):  # noise: every frame is big, so cutting the file loses frames
+            img = rng.integers(0, 255, (240, 320, 3), np.uint8)
+            for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+    data = (clip / "video.mp4").read_bytes()
+    (clip / "video.mp4").write_bytes(data[: int(len(data) * 0.6)])
+    (clip / "clip.yaml").write_text("sport: padel\nfps: 30\nwidth: 320\nheight: 240\nvideo: video.mp4\n")
+    assert main(["check", str(clip)]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL" in out and "video.mp4" in out and "cannot decode frame" in out
+
+
+def test_check_refuses_a_camera_of_another_frame_size(sample, capsys):
+    from dataclasses import replace
+
+    cam = Camera.load(sample / "gt" / "camera.yaml")
+    replace(cam, image_size=(1920, 1080)).save(sample / "camera.yaml")
+    assert main(["check", str(sample)]) == 1
+    out = capsys.readouterr().out
+    assert "camera.yaml: the calibration is for 1920×1080 frames but the video is 1280×720" in out
+
+
+def test_check_events_use_the_courts_labels(sample, capsys):
+    (sample / "clip.yaml").write_text((sample / "clip.yaml").read_text().replace("sport: padel", "sport: tennis"))
+    (sample / "events.csv").write_text("frame,event\n5,ground\n9,wall_left\n")
+    assert main(["check", str(sample)]) == 1
+    assert "events.csv, line 3: unknown event 'wall_left'" in capsys.readouterr().out
+
+
+def test_reconstruct_refuses_a_camera_of_another_frame_size(sample, capsys):
+    from dataclasses import replace
+
+    cam = Camera.load(sample / "gt" / "camera.yaml")
+    replace(cam, image_size=(1920, 1080)).save(sample / "camera.yaml")
+    assert main(["reconstruct", str(sample)]) == 1
+    err = capsys.readouterr().err
+    assert "camera.yaml" in err and "1920×1080" in err and "1280×720" in err
+    assert not (sample / "ball_3d.csv").exists()

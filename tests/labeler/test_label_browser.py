@@ -4,13 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
-from conftest import WEBGL_CANVAS, wait_for_canvas, wait_until
-from label_helpers import SAMPLE, copy_sample
+from conftest import wait_for_canvas, wait_until
+from label_helpers import SAMPLE, click_pixel, copy_sample, press, ready_view, select_point
 
 from inference.camera import Camera
 from inference.clipio import Clip
 from labeler.app import LabelerApp
-from labeler.viewer_common import screen_of_pixel
 
 pytestmark = pytest.mark.browser
 
@@ -24,42 +23,6 @@ def app_and_clip(tmp_path, port):
     app = LabelerApp(clip, port=port)
     yield app, clip
     app.stop()
-
-
-def ready_view(app, page, known: set[int] = frozenset()):
-    """The new tab's view, once its camera is fitted to the canvas and its first frame is shown."""
-    wait_until(lambda: set(app.views) - set(known), what="the tab's labeler view")
-    view = app.views[max(set(app.views) - set(known))]
-    box = page.locator(WEBGL_CANVAS).bounding_box()
-    wait_until(lambda: abs(view._aspect - box["width"] / box["height"]) < 1e-3, what="the camera fit to the canvas")
-    wait_until(lambda: view.shown >= 0, what="the first frame")
-    wait_until(lambda: view.camera_fitted, what="the browser to report the fitted camera "
-               f"({view.reported_camera}, {view.fit_distance}, {view._aspect})")
-    return view
-
-
-def point_field(page):
-    """The court tab's "point" dropdown in the page."""
-    return page.get_by_role("combobox", name="point")
-
-
-def select_point(page, view, name: str) -> None:
-    """Choose the court point ``name`` in the page's dropdown, as an annotator does."""
-    point_field(page).click()
-    page.get_by_role("option", name=name, exact=True).click()
-    wait_until(lambda: view.court_panel.point.value == name, what=f"{name} selected")
-
-
-def click_pixel(page, view, xy_px) -> None:
-    box = page.locator(WEBGL_CANVAS).bounding_box()
-    sx, sy = screen_of_pixel(np.asarray(xy_px, float)[None], view.plane, box["width"], box["height"],
-                             view.fit_distance)[0]
-    page.mouse.click(box["x"] + sx, box["y"] + sy)  # every caller then waits for the click's effect
-
-
-def press(page, key: str, times: int = 1) -> None:
-    for _ in range(times):
-        page.keyboard.press(key)
 
 
 def test_label_ball_event_court_points_and_reload(app_and_clip, viser_page):

@@ -108,14 +108,40 @@ def test_physics_interpolation_follows_a_parabola_between_events(clip_dir):
     assert abs(s.ball_proposals[12][2] - (0.2 + 0.001 * 4)) > 1e-3  # linear cannot follow the curve
 
 
-def test_physics_interpolation_does_not_cross_a_contact(clip_dir):
+def test_interpolation_never_crosses_an_event_or_a_long_gap(clip_dir):
     s = LabelSession(clip_dir)
-    for f, xy in [(0, (0.1, 0.1)), (5, (0.2, 0.3)), (10, (0.3, 0.5)), (20, (0.5, 0.3))]:
-        s.set_ball(f, xy)
+    for f, xy in [(0, (0.1, 0.1)), (5, (0.2, 0.3)), (10, (0.3, 0.5)), (20, (0.5, 0.3)), (120, (0.9, 0.9))]:
+        s.set_ball(f, xy, visibility=3)  # occluded keyframes: the filled rows are still "visible"
     s.set_event(15, "ground")
-    s.interpolate("physics", start=11, stop=19)
-    assert set(s.ball_proposals) == set(range(11, 20))
-    np.testing.assert_allclose(s.ball_proposals[15][1:], [0.4, 0.4])  # linear across the bounce
+    n = s.interpolate("physics")
+    assert n == 8 and set(s.ball_proposals) == set(range(1, 5)) | set(range(6, 10))
+    assert {r[0] for r in s.ball_proposals.values()} == {1}
+    assert [why for *_, why in s.interpolation_skipped] == ["event @15", "100 frames apart (max 15)"]
+    assert s.interpolate("linear", max_gap=200) == 8 + 99  # a longer limit fills 20..120 (no event there)
+    assert not set(range(11, 20)) & set(s.ball_proposals)
+
+
+def test_physics_interpolation_meets_both_keyframes_and_bends(clip_dir):
+    s = LabelSession(clip_dir)
+    t = [0, 4, 8, 12, 16]
+    for f in t:
+        s.set_ball(f, (0.2 + 0.02 * f, 0.6 - 0.04 * f + 0.003 * f * f))  # y: a parabola (up, then down)
+    s.interpolate("physics")
+    for f in (2, 6, 10, 14):
+        np.testing.assert_allclose(s.ball_proposals[f][1:], (0.2 + 0.02 * f, 0.6 - 0.04 * f + 0.003 * f * f),
+                                   atol=1e-9)
+
+
+def test_accepting_a_flight_stops_at_its_events(clip_dir):
+    s = LabelSession(clip_dir)
+    for f in (0, 6, 12, 20, 26):
+        s.set_ball(f, (0.1 + 0.01 * f, 0.5))
+    s.set_event(12, "player_near")
+    s.interpolate("linear")
+    assert s.flight(8) == (0, 12) and s.flight(12) == (12, 239)
+    n, (lo, hi) = s.accept_flight_proposals(3)
+    assert n == 10 and (lo, hi) == (0, 12)
+    assert all(f in s.ball for f in range(0, 13)) and 13 not in s.ball and 21 in s.ball_proposals
 
 
 def test_model_proposals_only_fill_unlabelled_frames_unless_overwrite(clip_dir):
@@ -190,11 +216,11 @@ def test_two_sessions_on_one_clip_merge_and_report(clip_dir):
     a.set_ball(10, (0.1, 0.1))
     b.set_ball(20, (0.2, 0.2))  # b has not seen a's row: it must merge, not overwrite
     assert set(Clip(clip_dir).read_ball().frame.tolist()) == {10, 20}
-    assert set(b.ball) == {10, 20} and "merged 1 row" in b.notices[-1]
+    assert set(b.ball) == {10, 20} and "loaded 1 row(s) saved by another tab" in b.notices[-1]
     a.set_event(5, "ground")
-    b.set_event(5, "net")  # both changed the same row: b's value wins and b is told
+    b.set_event(5, "net")  # b reads a's row first: its undo brings a's value back, not "no event"
     assert Clip(clip_dir).read_events().at(5) == "net"
-    assert "also changed elsewhere" in b.notices[-1] and "events:5" in b.notices[-1]
+    assert b.undo_stack[-1].changes[0].old == "ground"
     a.sync()
     assert a.events[5] == "net" and set(a.ball) == {10, 20}
     a.clear_ball(20)  # a deletes a row b wrote: deletions merge too
@@ -212,3 +238,60 @@ def test_dataset_overview_and_clip_discovery(tmp_path):
     assert [c.root.name for c in find_clips(tmp_path / "ds" / "a")] == ["a"]
     with pytest.raises(FileNotFoundError, match="neither a clip folder"):
         find_clips(tmp_path)
+
+
+def test_undo_restores_only_what_this_tab_wrote(clip_dir):
+    a, b = LabelSession(clip_dir, name="tab 1"), LabelSession(clip_dir, name="tab 2")
+    a.set_ball(5, (0.1, 0.1))
+    a.set_ball(6, (0.2, 0.2))
+    b.set_ball(5, (0.5, 0.5))  # b changes a's row
+    a.undo()  # undoes frame 6 (a's own, untouched by b)
+    assert 6 not in a.ball
+    a.undo()  # frame 5 now holds b's value: left alone, and a says who changed it
+    assert a.ball[5] == (1, 0.5, 0.5)
+    assert Clip(clip_dir).read_ball().frame.tolist() == [5]
+    assert "ball @5 (by tab 2)" in a.notices[-1]
+    b.undo()  # b's own edit undoes to what it replaced (a's value)
+    np.testing.assert_allclose(Clip(clip_dir).read_ball().xy[0], (0.1, 0.1))
+
+
+def test_unknown_columns_survive_labelling(clip_dir):
+    (clip_dir / "ball.csv").write_text("frame,visibility,x,y,note\n3,1,0.5,0.5,check this\n")
+    (clip_dir / "events.csv").write_text("frame,event,who\n3,ground,ann\n")
+    s = LabelSession(clip_dir)
+    s.set_ball(4, (0.6, 0.6))
+    s.set_event(9, "net")
+    ball, events = Clip(clip_dir).read_ball(), Clip(clip_dir).read_events()
+    assert ball.extra["note"].tolist() == ["check this", ""] and events.extra["who"].tolist() == ["ann", ""]
+
+
+def test_a_bad_row_is_an_error_or_skipped_with_a_backup(clip_dir):
+    text = "frame,visibility,x,y\n0,1,0.5,0.5\n1,1,1.2,0.5\n2,1,0.4,0.4\n"
+    (clip_dir / "ball.csv").write_text(text)
+    with pytest.raises(FormatError, match="ball.csv, line 3"):
+        LabelSession(clip_dir)
+    s = LabelSession(clip_dir, skip_bad_rows=True)
+    assert set(s.ball) == {0, 2} and [e.line for e in s.skipped["ball"]] == [3]
+    assert (clip_dir / "ball.csv").read_text() == text  # opening does not touch the file
+    s.set_ball(5, (0.3, 0.3))
+    backups = list((clip_dir / ".rally3d" / "backup").glob("ball.csv.*"))
+    assert len(backups) == 1 and backups[0].read_text() == text and "original is kept" in s.notices[-1]
+    assert Clip(clip_dir).read_ball().frame.tolist() == [0, 2, 5]
+
+
+def test_events_of_another_sport_are_refused(clip_dir):
+    (clip_dir / "clip.yaml").write_text((clip_dir / "clip.yaml").read_text().replace("padel", "tennis"))
+    (clip_dir / "events.csv").write_text("frame,event\n3,wall_left\n")
+    with pytest.raises(FormatError, match="unknown event 'wall_left'"):
+        LabelSession(clip_dir)
+
+
+def test_temp_files_of_a_crashed_save_are_removed_at_start(clip_dir):
+    import os
+    import time
+
+    litter = clip_dir / ".events.csv.k2j3h4.tmp"
+    litter.write_text("frame,ev")
+    os.utime(litter, (time.time() - 600, time.time() - 600))
+    s = LabelSession(clip_dir)
+    assert not litter.exists() and "removed 1 temporary file" in s.notices[-1]

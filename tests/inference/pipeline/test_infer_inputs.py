@@ -141,3 +141,42 @@ def test_start_end_cut_a_stretch_of_a_long_video(tmp_path, capsys):
     assert main(["infer", str(SAMPLE / "video.mp4"), "--court", "padel", "--start", "3", "--end", "2",
                  "--out", str(tmp_path / "bad")]) == 1
     assert "must come after --start" in capsys.readouterr().err
+
+
+def test_court_points_given_in_place_back_up_the_clicked_file(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c")
+    clicked = (clip / "court_points.csv").read_text()
+    other = tmp_path / "other_points.csv"
+    lines = clicked.splitlines()
+    other.write_text("\n".join(lines[:-1]) + "\n")  # one point fewer: a different file
+    code = main(["infer", str(clip), "--court-points", str(other), "--no-progress", "--pose", "none",
+                 "--only", "camera"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert (clip / "court_points.csv").read_text() != clicked
+    backups = list((clip / ".rally3d" / "backup").glob("court_points.csv.*"))
+    assert len(backups) == 1 and backups[0].read_text() == clicked
+    assert "court_points.csv is replaced by" in out and str(backups[0]) in out
+
+
+def test_camera_given_in_place_backs_up_the_clip_camera(tmp_path, capsys):
+    clip = _blank_clip(tmp_path / "c")
+    cam = Clip(SAMPLE).read_camera(gt=True)
+    cam.save(clip / "camera.yaml")
+    mine = (clip / "camera.yaml").read_text()
+    from dataclasses import replace
+
+    moved = replace(cam, P=cam.P * 1.0001)
+    moved.save(tmp_path / "new_camera.yaml")
+    code = main(["infer", str(clip), "--camera", str(tmp_path / "new_camera.yaml"), "--no-progress",
+                 "--pose", "none", "--only", "camera"])
+    out = capsys.readouterr().out
+    assert code == 0
+    backups = list((clip / ".rally3d" / "backup").glob("camera.yaml.*"))
+    assert len(backups) == 1 and backups[0].read_text() == mine
+    assert "camera.yaml is replaced by" in out
+    # the same file again: nothing to back up
+    main(["infer", str(clip), "--camera", str(tmp_path / "new_camera.yaml"), "--no-progress", "--pose", "none",
+          "--only", "camera"])
+    capsys.readouterr()
+    assert len(list((clip / ".rally3d" / "backup").glob("camera.yaml.*"))) == 1

@@ -18,7 +18,16 @@ from labeler.review.data import ReviewData
 from labeler.review.export import export_review
 from labeler.review.overlay import draw_overlay, project_segments
 from labeler.review.playback import Playback
-from labeler.review.scene import BALL_RGB, camera_presets, trail_segments, triangulate_polygon
+from labeler.review.scene import (
+    BALL_RGB,
+    LABEL_CHAR_PX,
+    LABEL_LINE_PX,
+    camera_presets,
+    contact_labels,
+    spread_labels,
+    trail_segments,
+    triangulate_polygon,
+)
 
 
 @pytest.fixture(scope="module")
@@ -149,6 +158,40 @@ def test_export_writes_a_playable_replay_and_the_shot_table(data, tmp_path):
     assert len(rows) == len(data.analysis.shots) == 6
     assert [r["team"] for r in rows] == ["near", "far", "near", "far", "near", "far"]
     assert all(r["call"] == "in" for r in rows[:5])
+    # the page's side panel: the clip's video copied beside it, the shot table, the frame read-outs
+    assert (tmp_path / "out" / "video.mp4").read_bytes() == data.clip.video_path.read_bytes()
+    assert html.count('<tr><td>') == 6 and 'id="rally3d-video" src="video.mp4"' in html
+    assert "rally3d-video-frame" in html and f'"hits": {[s.hit.frame for s in data.analysis.shots]}' in html
+    labels = [m[1]["updates"]["text"] for m in rec["messages"] if m[1]["type"] == "SceneNodeUpdateMessage"
+              and m[1]["name"] == "/replay/frame" and "text" in m[1]["updates"]]
+    assert labels[0] == f"frame {data.first_frame}" and labels[-1] == f"frame {data.last_frame}"
+
+
+def boxes_of(labels, project) -> list[tuple[float, float, float, float]]:
+    out = []
+    for lab in labels:
+        u, v = project((lab.anchor + (0, 0, lab.lift))[None])[0]
+        half = 0.5 * LABEL_CHAR_PX * len(lab.text)
+        out.append((u - half, v - LABEL_LINE_PX, u + half, v))
+    return out
+
+
+def overlaps(boxes) -> list[tuple[int, int]]:
+    return [(i, j) for i, a in enumerate(boxes) for j, b in enumerate(boxes[:i])
+            if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]]
+
+
+def test_contact_labels_do_not_overlap_in_the_broadcast_view(data):
+    project = data.camera.project
+    labels = contact_labels(data.analysis, project)
+    assert len(labels) >= 10 and all("@" in lab.text for lab in labels)  # shot number and frame in each
+    plain = contact_labels(data.analysis)  # without spreading, the sample's labels do cover each other
+    assert overlaps(boxes_of(plain, project))
+    assert not overlaps(boxes_of(labels, project))
+    # three labels on one spot are stacked, each lifted above the one before
+    pts = np.zeros((3, 3))
+    lifts = spread_labels(pts, ["in +20 cm"] * 3, project)
+    assert lifts[0] < lifts[1] < lifts[2]
 
 
 def test_cli_export(reconstructed_clip, tmp_path, capsys):

@@ -7,14 +7,17 @@ README screenshot.
 from __future__ import annotations
 
 import os
+import shutil
 
 import cv2
 import numpy as np
 import pytest
-from conftest import WEBGL_CANVAS, wait_until
+from conftest import WAIT_CEILING_S, WEBGL_CANVAS, wait_for_canvas, wait_until
 from review_fixtures import reconstructed_clip  # noqa: F401  (fixture)
 
 from labeler.review.app import ReviewApp
+from labeler.review.data import ReviewData
+from labeler.review.export import export_review
 
 pytestmark = pytest.mark.browser
 
@@ -39,12 +42,20 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
     app = ReviewApp(reconstructed_clip, port=port)
     app.start()
     try:
-        page = viser_page(port, width=1000, height=620)
+        page = viser_page(port, width=1700, height=760)
         wait_until(lambda: bool(app.sessions), what="the review session")
         session = next(iter(app.sessions.values()))
         session.playback.seek(40)  # the serve in flight, over the court
         session.render()
         canvas = page.locator(WEBGL_CANVAS)
+        # the video beside the 3D view at a usable size, named by the same frame number as the 3D ball
+        wait_until(lambda: "frame 40 (3D view and video)" in page.inner_text("body"), what="the frame caption")
+        video = page.locator("img[src^='blob:']").first  # the video frame (an object URL)
+        wait_until(lambda: (video.bounding_box() or {}).get("width", 0) >= 600, what="the video panel at 600+ px")
+        vbox, cbox = video.bounding_box(), canvas.bounding_box()
+        assert vbox["height"] >= 300 and vbox["x"] + vbox["width"] <= cbox["x"] + 1  # beside, not over the 3D view
+        assert cbox["width"] >= 600
+        assert session.shown == 40
         shots: list[np.ndarray] = []
 
         def court_and_ball_drawn() -> bool:
@@ -92,3 +103,34 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
                         [cv2.IMWRITE_PNG_COMPRESSION, 9])
     finally:
         app.stop()
+
+
+HOSTILE = '<img src=x onerror="window.__pwned=1">'
+
+
+def test_replay_html_has_the_video_the_shot_table_and_frame_numbers(reconstructed_clip, browser, tmp_path):
+    clip = shutil.copytree(reconstructed_clip, tmp_path / HOSTILE)  # a hostile folder name stays text
+    data = ReviewData.load(clip)
+    res = export_review(data, tmp_path / "out", stride=4, progress=False)
+    page = browser.new_page(viewport={"width": 1500, "height": 850})
+    page.set_default_timeout(WAIT_CEILING_S * 1000)
+    try:
+        page.goto(res.html.as_uri(), wait_until="load")
+        wait_for_canvas(page)
+        rows = page.locator("#rally3d-shots tbody tr")
+        assert rows.count() == len(data.analysis.shots) == 6
+        first = [c.strip() for c in rows.nth(1).locator("td").all_inner_texts()]
+        shot = data.analysis.shots[1]
+        assert first[:2] == [str(shot.index), f"{shot.team} shot @{shot.hit.frame}"] and first[5] == shot.verdict
+        assert page.locator("#rally3d-side h3").inner_text() == HOSTILE
+        assert page.evaluate("window.__pwned === undefined")
+        side, canvas = page.locator("#rally3d-side").bounding_box(), page.locator(WEBGL_CANVAS).bounding_box()
+        assert side["x"] + side["width"] <= canvas["x"] + 1 and canvas["width"] >= 600  # side by side
+        assert page.locator("#rally3d-video").get_attribute("src") == "video.mp4"
+        rows.nth(2).click()  # the video jumps to the shot's hit and names its frame; the row is highlighted
+        hit = data.analysis.shots[2].hit.frame
+        out = page.locator("#rally3d-video-frame")
+        wait_until(lambda: out.inner_text().strip() == f"video: frame {hit}", what=f"the video on frame {hit}")
+        assert "now" in (rows.nth(2).get_attribute("class") or "")
+    finally:
+        page.close()

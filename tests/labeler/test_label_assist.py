@@ -1,0 +1,131 @@
+"""The labeler's pieces without a browser: escaping of file-derived text, the in-page error and the cheat-sheet,
+the frame number burned into each picture, the frame stack, detector-driven navigation and colours, proposed
+events and the next court point."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from label_helpers import copy_sample
+
+from inference.clipio import Clip, FormatError
+from inference.clipio.tables import BallTrack, HitEvents
+from labeler.app import error_markdown, shortcuts_markdown
+from labeler.frames import stamp_frame_number
+from labeler.framestack import BACK_SCALE, FrameStack
+from labeler.render import COLORS, confidence_color
+from labeler.state import LabelSession
+from labeler.viewer_common import ImagePlane, md_escape
+
+HOSTILE = '<iframe srcdoc="<script>parent.x=1</script>">|**b**'
+
+
+@pytest.fixture
+def clip_dir(tmp_path):
+    return copy_sample(tmp_path / "clip", keep_labels=False)
+
+
+def test_markdown_escaping_leaves_no_html_or_markup():
+    out = md_escape(HOSTILE)
+    assert "<" not in out and ">" not in out and "|" not in out.replace("\\|", "")
+    assert "\\*\\*b\\*\\*" in out  # emphasis shown as the characters typed
+
+
+def test_error_markdown_names_file_line_and_fix_escaped(tmp_path):
+    clip = Clip(tmp_path / HOSTILE)
+    err = FormatError(tmp_path / HOSTILE / "ball.csv", "x is outside [0, 1]: 1.2 <b>", line=3,
+                      fix="write x as a fraction of the width")
+    text = error_markdown(clip, err)
+    assert "line 3" in text and "fix: write x as a fraction of the width" in text
+    assert "<" not in text.replace("&lt;", "")
+
+
+def test_cheat_sheet_names_the_courts_events():
+    text = shortcuts_markdown(["ground", "net"])
+    assert "| 1 | event ground |" in text and "| 2 | event net |" in text and "| 3 |" not in text
+    assert "| ? | this cheat-sheet |" in text and "Enter or Escape leaves a field" in text
+
+
+def test_frame_number_is_burned_into_the_top_left_only():
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 255, (720, 1280, 3), dtype=np.uint8)
+    a, b = stamp_frame_number(img, 12), stamp_frame_number(img, 13)
+    changed = np.argwhere((a != img).any(-1))
+    assert changed[:, 0].max() < 60 and changed[:, 1].max() < 150  # a small box in the corner
+    assert (a[:60, :150] != b[:60, :150]).any()  # the numbers differ
+    np.testing.assert_array_equal(a[60:], img[60:])
+
+
+class FakeNode:
+    def __init__(self, position, scale):
+        self.position, self.scale = position, scale
+        self._data = None
+
+    def on_click(self, fn):
+        return fn
+
+    def on_drag(self, button):
+        return lambda fn: fn
+
+
+class FakeScene:
+    def __init__(self):
+        self.nodes = []
+
+    def add_image(self, name, img, render_width, render_height, format, position, scale):
+        self.nodes.append(FakeNode(position, scale))
+        return self.nodes[-1]
+
+
+def test_frame_stack_shows_a_prefetched_frame_without_sending_it_again():
+    stack = FrameStack(FakeScene(), ImagePlane(1280, 720), 4, on_click=lambda ev: None)
+    sent = []
+
+    def jpeg(i):
+        sent.append(i)
+        return f"jpeg{i}".encode()
+
+    stack.show(0, jpeg)
+    assert stack.preload([1, 2, 3, 4], jpeg) == []  # three planes behind the front one: 4 does not fit
+    assert sent == [0, 1, 2, 3]
+    front_before = stack.front
+    stack.show(2, jpeg)
+    assert sent == [0, 1, 2, 3] and stack.shown == 2 and stack.front != front_before
+    assert stack.nodes[stack.front].position[2] == 0.0  # in front; the others behind it
+    assert stack.nodes[stack.front].scale == 1.0
+    assert all(n.position[2] > 0 and n.scale == BACK_SCALE for i, n in enumerate(stack.nodes) if i != stack.front)
+    assert stack.nodes[stack.front]._data == b"jpeg2"
+    assert stack.preload([5], lambda i: None) == [5]  # not decoded yet: reported missing, nothing sent
+
+
+def test_next_uncertain_frame_and_confidence_colours(clip_dir):
+    s = LabelSession(clip_dir)
+    n = s.n_frames
+    scores = np.full(n, 0.9)
+    scores[[7, 30]] = [0.2, 0.1]
+    track = BallTrack(np.arange(n), np.ones(n, np.int8), np.full((n, 2), 0.5))
+    s.set_ball_proposals(track, "detector", scores)
+    s.set_ball(7, (0.4, 0.4))  # labelled: no longer uncertain
+    assert s.next_uncertain(0) == 30 and s.next_uncertain(30) == 30  # wraps round to itself
+    assert confidence_color(None) == COLORS["proposal"] and confidence_color(1.0) == COLORS["proposal"]
+    assert confidence_color(0.0) == COLORS["unsure"]
+
+
+def test_proposed_events_are_accepted_one_by_one(clip_dir):
+    s = LabelSession(clip_dir)
+    s.set_event_proposals(HitEvents(np.array([10, 40]), np.array(["player_near", "ground"])))
+    assert s.accept_event_proposals([40]) == 1
+    assert s.events == {40: "ground"} and s.event_proposals == {10: "player_near"}
+    assert Clip(clip_dir).read_events().frame.tolist() == [40]
+
+
+def test_next_court_point_prefers_points_in_view(clip_dir):
+    s = LabelSession(clip_dir)
+    gt = Clip(copy_sample(clip_dir.parent / "labelled")).read_court_points().as_dict()
+    for name in ["far_left", "far_right", "near_service_left", "near_service_right", "net_post_left_top",
+                 "net_post_right_top", "glass_far_left_top"]:
+        s.set_point(name, gt[name])  # calibrated: the other points are expected from the court model
+    left = (0.0, 0.0, s.width / 2, s.height)
+    right = (s.width / 2, 0.0, float(s.width), s.height)
+    expected = s.expected_points_px()
+    a, b = s.next_point(None, left), s.next_point(None, right)
+    assert expected[a][0] <= s.width / 2 <= expected[b][0]
