@@ -67,11 +67,14 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
         ball0 = np.argwhere(ball_mask(first))
 
         # press play in the GUI, as a user would
-        page.get_by_role("checkbox", name="play").click()
+        # check()/uncheck() click and then wait until the box shows the state (a click sent while the page is
+        # still laying out its panel on a loaded machine is retried instead of lost)
+        play = page.get_by_role("checkbox", name="play")
+        play.check(timeout=WAIT_CEILING_S * 1000)
         wait_until(lambda: session.playback.playing, what="play to reach the server")
         start = session.playback.frame
         wait_until(lambda: session.playback.frame >= start + 8, what="playback to advance")
-        page.get_by_role("checkbox", name="play").click()
+        play.uncheck(timeout=WAIT_CEILING_S * 1000)
         wait_until(lambda: not session.playback.playing, what="pause")
         # on a busy machine playback may run on while the pause click is delivered (past the reconstructed
         # frames, where no ball is drawn): look at a fixed frame 8 after the start for the on-screen check
