@@ -130,6 +130,8 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
     dev = bool(cfg.trainer.get("fast_dev_run"))
     trainer.fit(module, datamodule=dm, ckpt_path=resume_path(cfg), weights_only=not cfg.get("trust_checkpoint", False))
     metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
+    if not trainer.is_global_zero:  # DDP: calibration, decoder tuning, export and tables run once, on rank 0
+        return metrics
     best = getattr(trainer.checkpoint_callback, "best_model_path", "") if trainer.checkpoint_callback else ""
     if best and not dev:
         module.load_state_dict(read_checkpoint(best)["state_dict"])
