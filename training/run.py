@@ -348,6 +348,18 @@ class DetectorEval:
     ball_input: str = ""
 
 
+def eval_device(cfg: DictConfig) -> str:
+    """The device eval.py runs a detector on, from ``trainer.accelerator`` (cpu, gpu/cuda, auto)."""
+    import torch
+
+    acc = str((cfg.get("trainer") or {}).get("accelerator", "cpu"))
+    if acc in ("gpu", "cuda") or (acc == "auto" and torch.cuda.is_available()):
+        if not torch.cuda.is_available():
+            raise ValueError(f"trainer.accelerator={acc} but no CUDA device is visible: use trainer.accelerator=cpu")
+        return "cuda"
+    return "cpu"
+
+
 def eval_split(cfg: DictConfig, source) -> str:
     """``split: auto``: the test split of a dataset with manifest.yaml, every clip of a plain folder."""
     split = str(cfg.get("split") or "auto")
@@ -391,7 +403,7 @@ def evaluate_detector(cfg: DictConfig) -> DetectorEval:
         raise FileNotFoundError(f"checkpoint {path} not found")
     runner = BallDetectorRunner.from_weights(cfg.model.net.name, path, trust=bool(cfg.get("trust_checkpoint", False)),
                                              step=int(cfg.get("step") or cfg.model.net.frames_in),
-                                             batch_size=int(cfg.get("batch_size") or 4))
+                                             batch_size=int(cfg.get("batch_size") or 4), device=eval_device(cfg))
     if cfg.data.get("normalize") and cfg.data.normalize != runner.normalize:
         log.info("%s states %s normalisation: used instead of data.normalize=%s", path, runner.normalize,
                  cfg.data.normalize)

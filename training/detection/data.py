@@ -264,7 +264,7 @@ class BallDataModule(L.LightningDataModule):
                  train_step: int = 1, batch_size: int = 8, num_workers: int = 0, cache_dir: str | None = None,
                  seed: int = 1234, root_weights: list[float] | None = None, split_seed: int | None = None):
         super().__init__()
-        self.save_hyperparameters(logger=False)
+        self.save_hyperparameters()  # logged with the module's (hparams.yaml)
         self.net_size = tuple(net_size)
         self.data: dict[str, BallWindows] = {}
         self._sources = None
