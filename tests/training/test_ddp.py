@@ -178,7 +178,7 @@ def _run_ddp(overrides: list[str], run: Path) -> None:
     return out
 
 
-def _validate_single(overrides: list[str], ckpt: Path, out: Path) -> dict[str, float]:
+def _validate_single(overrides: list[str], ckpt: Path, out: Path) -> tuple[dict[str, float], object]:
     """One process: the same config without DDP, validating the DDP run's checkpoint."""
     sys.path.insert(0, str(ROOT / "tests" / "training"))
     from test_template import compose_cfg  # noqa: E402 - the helper of the template tests
@@ -188,7 +188,7 @@ def _validate_single(overrides: list[str], ckpt: Path, out: Path) -> dict[str, f
     cfg = compose_cfg([*overrides, "logger=csv"], out)
     dm, module, trainer = build(cfg)
     trainer.validate(module, datamodule=dm, ckpt_path=str(ckpt), weights_only=True)
-    return {k: float(v) for k, v in trainer.callback_metrics.items()}
+    return {k: float(v) for k, v in trainer.callback_metrics.items()}, dm
 
 
 @pytest.mark.slow
@@ -200,7 +200,7 @@ def test_ddp_sim_wasb_global_val_f1_equals_single_process(tmp_path):
     data = tmp_path / "synth_padel"
     generate_dataset(data, 3, seed=8, config=SynthConfig(sport="padel", randomise_camera=False, width=320,
                                                          height=192, fps=30.0, codec="mp4v", randomise_look=False,
-                                                         max_frames=31))
+                                                         max_frames=34))
     cache = tmp_path / "cache"
     overrides = ["+experiment=wasb_padel", f"data.root={data}", "data.net_size=[96,160]", "data.crop=[64,64]",
                  "data.batch_size=2", f"data.cache_dir={cache}", "trainer.max_epochs=1",
@@ -212,9 +212,14 @@ def test_ddp_sim_wasb_global_val_f1_equals_single_process(tmp_path):
     ddp = {k: _last(rows, f"val/{k}") for k in ("f1", "tp", "fp1", "fp2", "fn", "tn")}
     assert sorted(p.name for p in cache.iterdir()) == sorted(p.name for p in cache.glob("clip_*.npy"))  # no temp left
     assert len(list(cache.glob("*.npy"))) == 3                                     # one cache per clip
-    single = _validate_single(overrides, run / "checkpoints" / "last.ckpt", tmp_path / "single")
+    single, dm = _validate_single(overrides, run / "checkpoints" / "last.ckpt", tmp_path / "single")
     assert {k: single[f"val/{k}"] for k in ddp} == pytest.approx(ddp, abs=1e-6)
-    assert ddp["tp"] + ddp["fp1"] + ddp["fp2"] + ddp["fn"] + ddp["tn"] == 30     # every val frame once (31 - 1 window tail)
+    ds = dm.data["val"]                                  # every labelled output frame of the val windows, once
+    fi, fo = ds.spec.frames_in, ds.spec.frames_out
+    frames = [ds.clips[c].visibility[s + fi - fo:s + fi] for c, s in ds.index]
+    assert len(ds) % 2 == 1                              # odd: the ranks validate 5 and 4 windows (no padding)
+    assert sum(ddp[k] for k in ("tp", "fp1", "fp2", "fn", "tn")) == sum(int(((v >= 0) & (v != 3)).sum()) for v in frames)
+    assert ddp["tp"] > 0 and 0 < ddp["f1"] < 1
     assert (run / "wasb.pth.tar").is_file()
 
 
@@ -231,7 +236,7 @@ def test_ddp_sim_hitnet_global_val_f1_equals_single_process(tmp_path):
     ddp = {k: _last(rows, f"val/{k}") for k in ("f1", "acc")}
     cached = sorted(p.name for p in (tmp_path / "events_cache").iterdir())
     assert len(cached) == 2 and all(n.endswith(".pkl") for n in cached)          # train and val, built once, no temp
-    single = _validate_single(overrides, run / "checkpoints" / "last.ckpt", tmp_path / "single")
+    single, _ = _validate_single(overrides, run / "checkpoints" / "last.ckpt", tmp_path / "single")
     assert single["val/f1"] == pytest.approx(ddp["f1"], abs=1e-6)
     assert single["val/acc"] == pytest.approx(ddp["acc"], abs=1e-6)
     assert 0.0 < ddp["acc"] < 1.0
