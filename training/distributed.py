@@ -6,8 +6,6 @@
 - :func:`eval_sampler` gives each rank its share of a validation/test set **without** the padding of
   ``DistributedSampler`` (which repeats samples so that every rank has as many): the union of the shards
   is exactly the single-process set, so the global figures equal the single-process ones.
-- :func:`is_main_process` guards work done after ``fit`` (exporting a model file, tuning a decoder)
-  that must run once.
 
 Outside a process group every function is the identity (one process: nothing to reduce).
 
@@ -16,7 +14,6 @@ Example:
 """
 from __future__ import annotations
 
-import os
 from collections.abc import Sized
 
 import numpy as np
@@ -59,15 +56,6 @@ def all_gather_concat(values: np.ndarray) -> np.ndarray:
     return np.concatenate(parts)
 
 
-def is_main_process() -> bool:
-    """True on global rank 0, and in a single process (also before Lightning sets up a process group:
-    a DDP child started by Lightning has ``RANK``/``LOCAL_RANK`` in its environment)."""
-    if world()[1] > 1:
-        return world()[0] == 0
-    return int(os.environ.get("RANK", os.environ.get("LOCAL_RANK", "0")) or 0) == 0 \
-        and int(os.environ.get("NODE_RANK", "0") or 0) == 0
-
-
 class EvalShard(DistributedSampler):
     """Rank ``rank``'s share of ``base`` (a sampler or a sized dataset): items ``rank, rank + world, …`` of
     its deterministic order, **without padding**: the shards of all ranks hold the whole set exactly once
@@ -98,4 +86,4 @@ def eval_sampler(trainer, base) -> Sampler | None:
     return EvalShard(base, trainer.global_rank, trainer.world_size)
 
 
-__all__ = ["EvalShard", "all_gather_concat", "all_reduce_sum", "eval_sampler", "is_main_process", "world"]
+__all__ = ["EvalShard", "all_gather_concat", "all_reduce_sum", "eval_sampler", "world"]

@@ -220,6 +220,7 @@ def test_ddp_sim_wasb_global_val_f1_equals_single_process(tmp_path):
     assert len(ds) % 2 == 1                              # odd: the ranks validate 5 and 4 windows (no padding)
     assert sum(ddp[k] for k in ("tp", "fp1", "fp2", "fn", "tn")) == sum(int(((v >= 0) & (v != 3)).sum()) for v in frames)
     assert ddp["tp"] > 0 and 0 < ddp["f1"] < 1
+    print(f"WASB ddp_sim: 2 ranks {ddp}; one process {({k: single[f'val/{k}'] for k in ddp})}")
     assert (run / "wasb.pth.tar").is_file()
 
 
@@ -240,4 +241,5 @@ def test_ddp_sim_hitnet_global_val_f1_equals_single_process(tmp_path):
     assert single["val/f1"] == pytest.approx(ddp["f1"], abs=1e-6)
     assert single["val/acc"] == pytest.approx(ddp["acc"], abs=1e-6)
     assert 0.0 < ddp["acc"] < 1.0
+    print(f"HitNet ddp_sim: 2 ranks {ddp}; one process val/f1 {single['val/f1']}, val/acc {single['val/acc']}")
     assert (run / "hitnet_padel.pth.tar").is_file()

@@ -63,7 +63,7 @@ def test_debug_configs_compose_and_win_over_the_experiment(debug, experiment, tm
 
 
 def test_debug_fdr_runs_one_step(tiny, tmp_path):
-    from training.run import optimized_metric, train
+    from training.run import train
 
     cfg = compose_cfg(["+experiment=wasb_padel", "debug=fdr", *small(tiny)], tmp_path)
     metrics = train(cfg)
