@@ -324,9 +324,10 @@ class BallDataModule(L.LightningDataModule):
         return windows
 
     def prepare_data(self) -> None:
-        """Build the frame caches of every split once (Lightning calls this on one process per node before
-        :meth:`setup` on all of them, so DDP ranks never decode and write the same cache together)."""
-        for split in ("train", "val", "test"):
+        """Build the frame caches of the fit splits once (Lightning calls this on one process per node
+        before :meth:`setup` on all of them, so DDP ranks do not decode the same videos together; the test
+        split's are built when tested, each rank under its own temporary name)."""
+        for split in ("train", "val"):
             for c, k in self._clips(split):
                 if c.ball_path.is_file():
                     load_clip(c, self.net_size, self._cache_dir(c, k), progress=True)
