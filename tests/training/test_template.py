@@ -211,3 +211,24 @@ def test_eval_config_has_no_dead_logger_and_reads_the_accelerator(tmp_path):
         with pytest.raises(ValueError, match="trainer.accelerator=cpu"):
             eval_device(cfg)
     assert cfg.results_path is None                                      # results.{json,csv} in the run folder
+
+
+@pytest.mark.slow
+def test_detector_optuna_sweep_runs_two_trials(tiny, tmp_path):
+    """``train.py -m +hparams_search=detector_optuna`` as a user runs it (two trials of ``debug=fdr``):
+    Optuna receives each trial's val/f1_best and writes its best parameters."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PROJECT_ROOT": str(ROOT), "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    cmd = [sys.executable, str(ROOT / "train.py"), "+experiment=wasb_padel", "+hparams_search=detector_optuna",
+           "hydra.sweeper.n_trials=2", "hydra.sweeper.sampler.n_startup_trials=2", "debug=fdr",
+           f"paths.log_dir={tmp_path}", *small(tiny)]
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1500)
+    assert out.returncode == 0, out.stderr[-4000:]
+    results = list(tmp_path.glob("debug/multiruns/*/optimization_results.yaml"))
+    assert len(results) == 1, out.stdout[-2000:]
+    best = yaml.safe_load(results[0].read_text())
+    assert set(best["best_params"]) == {"model.optimizer.lr", "loss", "data.radius"}
+    assert 0.0 <= float(best["best_value"]) <= 1.0
+    assert len(list(results[0].parent.glob("[0-9]*/.hydra/overrides.yaml"))) == 2
