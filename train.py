@@ -10,13 +10,13 @@ os.environ.setdefault("PROJECT_ROOT", str(Path(__file__).resolve().parent))
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="train")
 def main(cfg: DictConfig) -> float | None:
+    """Returns ``optimized_metric`` (default ``val/f1_best``; hit events ``events/val_f1``) to sweepers."""
     from training.preflight import check_data
 
     check_data(cfg)  # before torch and Lightning are imported: a missing dataset is made or named at once
-    from training.run import train
+    from training.run import optimized_metric, train
 
-    metrics = train(cfg)
-    return metrics.get("events/val_f1", metrics.get("val/f1"))  # hit-event runs: F1 after decoder tuning
+    return optimized_metric(cfg, train(cfg))
 
 
 if __name__ == "__main__":

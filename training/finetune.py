@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import torch
 from torch import nn
 
 
@@ -47,6 +48,31 @@ def hold_frozen_norms(net: nn.Module, prefixes: Sequence[str]) -> int:
             m.eval()
             count += 1
     return count
+
+
+def unused_parameters(net: nn.Module, example: torch.Tensor) -> list[str]:
+    """Names of the learnable parameters that get no gradient from ``net(example)`` (e.g. WASB's
+    ``stage4.0.fuse_layers.{1,2,3}``: kept for checkpoint compatibility, never computed). Run in eval
+    mode, so batch-norm statistics are untouched."""
+    was = net.training
+    named = [(n, p) for n, p in net.named_parameters() if p.requires_grad]
+    net.eval()
+    try:
+        out = net(example)
+        grads = torch.autograd.grad(out.float().sum(), [p for _, p in named], allow_unused=True)
+    finally:
+        net.train(was)
+    return [n for (n, _), g in zip(named, grads) if g is None]
+
+
+def freeze_unused(net: nn.Module, example: torch.Tensor) -> list[str]:
+    """Freeze (``requires_grad=False``) the parameters :func:`unused_parameters` finds; they stay in the
+    state_dict, so checkpoints keep their layout. DDP then needs no ``find_unused_parameters``."""
+    names = unused_parameters(net, example)
+    params = dict(net.named_parameters())
+    for name in names:
+        params[name].requires_grad_(False)
+    return names
 
 
 def trainable(module: nn.Module):

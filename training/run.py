@@ -45,7 +45,67 @@ def init_source(cfg: DictConfig) -> str | None:
     return cfg.get("init_weights") or (cfg.model.get("pretrained") if "model" in cfg else None) or None
 
 
+def apply_debug(cfg: DictConfig) -> DictConfig:
+    """``debug=NAME`` (conf/debug/): its ``debug.trainer`` settings merged over ``cfg.trainer`` last, so they
+    win over the experiment's (``+experiment`` is composed after the debug group). In place; returns cfg."""
+    extra = cfg.get("debug")
+    if isinstance(extra, DictConfig) and extra.get("trainer"):
+        with open_dict(cfg):
+            cfg.trainer = OmegaConf.merge(cfg.trainer, extra.trainer)
+    return cfg
+
+
+def log_hyperparameters(cfg: DictConfig, model, trainer) -> dict[str, Any]:
+    """Send the composed config (data, model, trainer, callbacks, seed, tags, the experiment) and the
+    parameter counts to every logger (CSV: ``hparams.yaml``, TensorBoard: the HPARAMS tab), as
+    lightning-hydra-template does; returns what was logged."""
+    if not trainer.loggers:
+        return {}
+
+    def plain(node):
+        try:
+            return OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
+        except Exception:  # noqa: BLE001 - an interpolation only Hydra's runtime can resolve
+            return OmegaConf.to_container(node, resolve=False)
+
+    hp: dict[str, Any] = {k: plain(cfg.get(k)) for k in ("task_name", "tags", "seed", "data", "model", "trainer",
+                                                         "callbacks", "ckpt_path", "init_weights", "task",
+                                                         "optimized_metric") if k in cfg}
+    hp["experiment"] = current_experiment()
+    params = list(model.parameters())
+    hp["model/params/total"] = sum(p.numel() for p in params)
+    hp["model/params/trainable"] = sum(p.numel() for p in params if p.requires_grad)
+    hp["model/params/non_trainable"] = hp["model/params/total"] - hp["model/params/trainable"]
+    for logger in trainer.loggers:
+        logger.log_hyperparams(hp)
+    return hp
+
+
+def optimized_metric(cfg: DictConfig, metrics: dict[str, float]) -> float | None:
+    """The value a sweeper optimises: ``metrics[cfg.optimized_metric]`` (e.g. ``val/f1_best``, the best
+    epoch's validation F1). Missing: an error in a sweep (naming what was logged), None otherwise."""
+    name = cfg.get("optimized_metric")
+    if not name:
+        return None
+    if name in metrics:
+        return float(metrics[name])
+    msg = (f"optimized_metric={name} was not logged by this run; logged: {', '.join(sorted(metrics)) or 'nothing'} "
+           "(set optimized_metric= to one of them)")
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        sweeping = HydraConfig.get().mode == RunMode.MULTIRUN
+    except (ValueError, AttributeError):
+        sweeping = False
+    if sweeping:
+        raise KeyError(msg)
+    log.warning(msg)
+    return None
+
+
 def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.Trainer]:
+    apply_debug(cfg)
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")  # plain lists: checkpoints load weights_only
@@ -60,6 +120,7 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
     kw = {"enable_progress_bar": progress_bar(cfg)} if "enable_progress_bar" not in cfg.trainer else {}
     trainer = hydra.utils.instantiate(cfg.trainer, callbacks=instantiate_group(cfg.get("callbacks")),
                                       logger=instantiate_group(cfg.get("logger")) or False, **kw)
+    log_hyperparameters(cfg, model, trainer)
     return datamodule, model, trainer
 
 
@@ -151,7 +212,9 @@ def save_manifests(datamodule, cfg: DictConfig) -> None:
 
 
 def train(cfg: DictConfig) -> dict[str, float]:
-    """Fit (optionally resuming from ``ckpt_path``), export the model file, then test; returns the metrics."""
+    """Fit (optionally resuming from ``ckpt_path``), export the model file, then test; returns the metrics.
+    Under DDP every rank fits and tests (Lightning's collectives); only rank 0 exports."""
+    apply_debug(cfg)
     check_data(cfg)
     if cfg.get("task") == "events" and str(cfg.model.get("_target_", "")).endswith("CropHitNetModule"):
         from training.events.crop_run import train_crop_events  # hitnet_crop_* experiments
@@ -171,10 +234,14 @@ def train(cfg: DictConfig) -> dict[str, float]:
         save_manifests(datamodule, cfg)
         metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
         best = getattr(trainer.checkpoint_callback, "best_model_path", "") if trainer.checkpoint_callback else ""
-        if not trainer.fast_dev_run:
-            export_detector(model, best, cfg)
+        best = trainer.strategy.broadcast(best)  # rank 0 knows the best checkpoint
+        if not trainer.fast_dev_run and trainer.is_global_zero:
+            export_detector(model, best, cfg, metrics)
     if cfg.get("test", False):
-        metrics.update(guarded_table("test", lambda: _test(trainer, model, datamodule, best), cfg))
+        tested = guarded_table("test", lambda: _test(trainer, model, datamodule, best), cfg)
+        metrics.update(tested)
+        if cfg.get("train", True) and not trainer.fast_dev_run and trainer.is_global_zero and "test/failed" not in tested:
+            export_detector(model, best, cfg, metrics)  # again, with the test scores (WASB-SBDT's test_* keys)
     return metrics
 
 
@@ -196,20 +263,35 @@ def guarded_table(name: str, run, cfg: DictConfig) -> dict[str, float]:
         return {f"{name}/failed": 1.0}
 
 
-def export_detector(module, best: str, cfg: DictConfig) -> list[Path]:
-    """Write the trained network (the best checkpoint's weights when there is one) as a model file with its
-    input description: ``<output_dir>/<model>.pth.tar`` and ``export_path``."""
+def wasb_sbdt_entries(metrics: dict[str, float]) -> dict[str, float]:
+    """The scalar entries WASB-SBDT's ``*_best.pth.tar`` files carry beside ``model_state_dict`` and
+    ``epoch``: ``train_loss`` and ``test_*`` (here also ``val_*``), from a run's metrics."""
+    out = {}
+    for key, value in metrics.items():
+        split, _, name = key.partition("/")
+        if key in ("train/loss_epoch", "train/loss") and "train_loss" not in out:
+            out["train_loss"] = float(value)
+        elif split in ("val", "test") and name and "/" not in name:
+            out[f"{split}_{name}"] = float(value)
+    return out
+
+
+def export_detector(module, best: str, cfg: DictConfig, metrics: dict[str, float] | None = None) -> list[Path]:
+    """Write the trained network (the best checkpoint's weights when there is one) as a model file in
+    WASB-SBDT's layout (``model_state_dict`` without prefixes, ``epoch`` of those weights, ``train_loss``,
+    ``val_*``/``test_*`` scores) plus its input description: ``<output_dir>/<model>.pth.tar`` and
+    ``export_path``."""
     from inference.models.checkpoint import load_weights, save_wasb_checkpoint
 
     spec = module.input_spec()
+    epoch = int(getattr(module, "current_epoch", 0))
     if best and Path(best).is_file():
-        load_weights(module.net, best)
+        epoch = int(load_weights(module.net, best)["meta"].get("epoch", epoch))
     outs = [Path(cfg.paths.output_dir) / f"{spec.arch or 'detector'}.pth.tar"]
     if cfg.get("export_path"):
         outs.append(Path(cfg.export_path))
-    epoch = int(getattr(module, "current_epoch", 0))
     for out in outs:
-        save_wasb_checkpoint(module.net, out, epoch=epoch, input=spec)
+        save_wasb_checkpoint(module.net, out, epoch=epoch, input=spec, **wasb_sbdt_entries(metrics or {}))
         log.info("exported %s (%s, %s normalisation, input %s)", out, spec.arch, spec.normalize, list(spec.input_size))
     return outs
 
@@ -266,6 +348,18 @@ class DetectorEval:
     ball_input: str = ""
 
 
+def eval_device(cfg: DictConfig) -> str:
+    """The device eval.py runs a detector on, from ``trainer.accelerator`` (cpu, gpu/cuda, auto)."""
+    import torch
+
+    acc = str((cfg.get("trainer") or {}).get("accelerator", "cpu"))
+    if acc in ("gpu", "cuda") or (acc == "auto" and torch.cuda.is_available()):
+        if not torch.cuda.is_available():
+            raise ValueError(f"trainer.accelerator={acc} but no CUDA device is visible: use trainer.accelerator=cpu")
+        return "cuda"
+    return "cpu"
+
+
 def eval_split(cfg: DictConfig, source) -> str:
     """``split: auto``: the test split of a dataset with manifest.yaml, every clip of a plain folder."""
     split = str(cfg.get("split") or "auto")
@@ -309,7 +403,7 @@ def evaluate_detector(cfg: DictConfig) -> DetectorEval:
         raise FileNotFoundError(f"checkpoint {path} not found")
     runner = BallDetectorRunner.from_weights(cfg.model.net.name, path, trust=bool(cfg.get("trust_checkpoint", False)),
                                              step=int(cfg.get("step") or cfg.model.net.frames_in),
-                                             batch_size=int(cfg.get("batch_size") or 4))
+                                             batch_size=int(cfg.get("batch_size") or 4), device=eval_device(cfg))
     if cfg.data.get("normalize") and cfg.data.normalize != runner.normalize:
         log.info("%s states %s normalisation: used instead of data.normalize=%s", path, runner.normalize,
                  cfg.data.normalize)

@@ -4,7 +4,7 @@ Every reader validates its input and raises :class:`FormatError` naming the file
 fix; every writer is atomic and deterministic.
 """
 
-from .atomic import atomic_write_bytes, atomic_write_text
+from .atomic import atomic_write_bytes, atomic_write_text, private_temp_path
 from .clip import Clip
 from .clip_yaml import ClipInfo, read_clip_yaml, write_clip_yaml
 from .csvfiles import (
@@ -67,6 +67,7 @@ __all__ = [
     "VideoFrames",
     "atomic_write_bytes",
     "atomic_write_text",
+    "private_temp_path",
     "export_tracknet_label",
     "hit_by_image_half",
     "import_thesis_ball",

@@ -6,6 +6,7 @@ A crash mid-write leaves the old file intact; readers never see a half-written f
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import tempfile
 import time
@@ -31,6 +32,14 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             pass
         raise
     return path
+
+
+def private_temp_path(path: str | Path) -> Path:
+    """A temporary name beside ``path`` that no other process uses (pid and random token), keeping the
+    suffix (``np.save`` keeps ``.npy``): two processes building the same file (DDP ranks, two runs)
+    never write into one temporary file; the last ``os.replace`` wins with a complete file."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
 
 
 def _umask() -> int:

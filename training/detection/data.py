@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, WeightedRandomSampler
 
-from inference.clipio import Clip, FormatError
+from inference.clipio import Clip, FormatError, private_temp_path
 from inference.detection.geometry import Letterbox
 from inference.detection.preprocess import normalize
 
@@ -84,20 +84,23 @@ def _build_cache(clip: Clip, lb: Letterbox, net_size, n: int, path: Path, progre
     from tqdm import tqdm
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npy")
+    tmp = private_temp_path(path)  # DDP ranks or two runs may build the same cache at once
     out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.uint8, shape=(n, net_size[0], net_size[1], 3))
     count = 0
-    with clip.frames(cache_size=0) as src:
-        for i, frame in enumerate(tqdm(src.iter(0, n), total=n, desc=f"cache {clip.root.name}", disable=not progress)):
-            out[i] = lb.warp(frame)
-            count = i + 1
-    out.flush()
-    del out
-    if count < n:
+    try:
+        with clip.frames(cache_size=0) as src:
+            for i, frame in enumerate(tqdm(src.iter(0, n), total=n, desc=f"cache {clip.root.name}",
+                                           disable=not progress)):
+                out[i] = lb.warp(frame)
+                count = i + 1
+        out.flush()
+        del out
+        if count < n:
+            raise FormatError(clip.video_path, f"the video has {count} frames but the clip needs {n}",
+                              fix="check clip.yaml's n_frames and the labels against the video")
+        tmp.replace(path)
+    finally:
         tmp.unlink(missing_ok=True)
-        raise FormatError(clip.video_path, f"the video has {count} frames but the clip needs {n}",
-                          fix="check clip.yaml's n_frames and the labels against the video")
-    tmp.replace(path)
 
 
 @dataclass(frozen=True)
@@ -261,7 +264,7 @@ class BallDataModule(L.LightningDataModule):
                  train_step: int = 1, batch_size: int = 8, num_workers: int = 0, cache_dir: str | None = None,
                  seed: int = 1234, root_weights: list[float] | None = None, split_seed: int | None = None):
         super().__init__()
-        self.save_hyperparameters(logger=False)
+        self.save_hyperparameters()  # logged with the module's (hparams.yaml)
         self.net_size = tuple(net_size)
         self.data: dict[str, BallWindows] = {}
         self._sources = None
@@ -320,6 +323,15 @@ class BallDataModule(L.LightningDataModule):
         self.window_source[split] = np.array([max(pairs[c][1], 0) for c, _ in windows.index], dtype=np.int64)
         return windows
 
+    def prepare_data(self) -> None:
+        """Build the frame caches of the fit splits once (Lightning calls this on one process per node
+        before :meth:`setup` on all of them, so DDP ranks do not decode the same videos together; the test
+        split's are built when tested, each rank under its own temporary name)."""
+        for split in ("train", "val"):
+            for c, k in self._clips(split):
+                if c.ball_path.is_file():
+                    load_clip(c, self.net_size, self._cache_dir(c, k), progress=True)
+
     def setup(self, stage: str | None = None) -> None:
         wanted = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), None: ("train", "val")}
         for split in wanted.get(stage, ("test",)):
@@ -338,7 +350,11 @@ class BallDataModule(L.LightningDataModule):
         return w / w.sum()
 
     def _loader(self, split: str, shuffle: bool) -> DataLoader:
+        from training.distributed import eval_sampler
+
         sampler = None
+        if split != "train":  # DDP: each rank its shard of the windows, none repeated (global F1 exact)
+            sampler = eval_sampler(getattr(self, "trainer", None), self.data[split])
         if split == "train" and (w := self.sample_weights()) is not None:
             sampler = WeightedRandomSampler(torch.as_tensor(w, dtype=torch.double), len(w), replacement=True,
                                             generator=torch.Generator().manual_seed(int(self.hparams.seed)))

@@ -19,11 +19,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from inference.detection.metrics import evaluate_detections
+from inference.detection.metrics import DetectionCounts, DetectionReport, Outcome, average_precision, classify_frames
 from inference.detection.postprocess import heatmap_to_candidates
 from inference.models.checkpoint import META_KEY, DetectorInput, architecture_of, load_weights
+from training.distributed import all_gather_concat, all_reduce_sum, world
 from training.finetune import freeze as freeze_layers
-from training.finetune import hold_frozen_norms, trainable
+from training.finetune import freeze_unused, hold_frozen_norms, trainable
 
 
 class BallDetector(L.LightningModule):
@@ -51,13 +52,18 @@ class BallDetector(L.LightningModule):
                  freeze: list[str] | None = None, ignore_flags: list[int] | None = (3,)):
         super().__init__()
         # factories are kept as attributes, not hyperparameters: checkpoints stay loadable with weights_only
-        self.save_hyperparameters(logger=False, ignore=["net", "loss", "optimizer", "scheduler"])
+        # (the loggers get the whole composed config from training.run.log_hyperparameters)
+        self.save_hyperparameters(ignore=["net", "loss", "optimizer", "scheduler"])
         self.optimizer_factory, self.scheduler_factory = optimizer, scheduler
         self.net = net
         self.loss_fn = loss
         if pretrained:
             load_weights(self.net, pretrained, trust=trust_checkpoint)
         self.frozen = freeze_layers(self.net, freeze or [])
+        # parameters the forward pass never uses (WASB's stage4 fuse paths into branches 1-3) learn
+        # nothing: frozen, so DDP needs no find_unused_parameters; they stay in the state_dict
+        self.unused = freeze_unused(self.net, torch.zeros(1, 3 * int(getattr(net, "frames_in", 3)), 32, 32))
+        self.best: dict[str, float] = {}  # best val/f1 of the run, sanity check left out (val/f1_best)
         if channels_last:
             self.net = self.net.to(memory_format=torch.channels_last)
         # kept out of the module tree so state_dict names stay those of the plain network
@@ -92,18 +98,24 @@ class BallDetector(L.LightningModule):
 
     def on_save_checkpoint(self, checkpoint: dict) -> None:
         checkpoint[META_KEY] = self.input_spec().to_dict()
+        if "val/f1" in self.best:
+            checkpoint["val_f1_best"] = self.best["val/f1"]  # a resumed run keeps its best so far
+
+    def on_load_checkpoint(self, checkpoint: dict) -> None:
+        if "val_f1_best" in checkpoint:
+            self.best["val/f1"] = float(checkpoint["val_f1_best"])
 
     def training_step(self, batch, batch_idx):
         x, y, meta = batch
         loss = self.loss_fn(self(x), y, meta.get("labelled"))
-        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(x))
+        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(x), sync_dist=True)
         return loss
 
     def _eval_step(self, batch, split: str):
         x, y, meta = batch
         logits = self(x)
         loss = self.loss_fn(logits, y, meta.get("labelled"))
-        self.log(f"{split}/loss", loss, prog_bar=True, on_epoch=True, batch_size=len(x))
+        self.log(f"{split}/loss", loss, prog_bar=True, on_epoch=True, batch_size=len(x), sync_dist=True)
         probs = torch.sigmoid(logits).float().cpu().numpy()
         self._count(probs, meta, split)
 
@@ -135,15 +147,38 @@ class BallDetector(L.LightningModule):
         self.outputs[split].append((pred_vis.ravel(), pred_xy.reshape(-1, 2), score.ravel(), vis.ravel(),
                                     gt.reshape(-1, 2)))
 
-    def _log_counts(self, split: str) -> None:
-        if not self.outputs[split]:
-            return
-        parts = [np.concatenate(a) for a in zip(*self.outputs[split])]
-        report = evaluate_detections(*parts, tau_px=self.hparams.tau_px, ignore_flags=tuple(self.hparams.ignore_flags or ()))
-        for name in ("precision", "recall", "f1", "accuracy", "ap", "rmse_px"):
-            value = report.as_dict()[name]
-            self.log(f"{split}/{name}", float(value) if value == value else 0.0, prog_bar=name == "f1")
+    def report(self, split: str) -> DetectionReport:
+        """The :class:`DetectionReport` of the frames of ``split`` seen since the last call, over **every**
+        process: TP/FP1/FP2/FN/TN and the squared distances are summed across ranks before the ratios, the
+        AP ranks the scores of all ranks (each rank validates only its shard)."""
+        parts = [np.concatenate(a) for a in zip(*self.outputs[split])] if self.outputs[split] else [
+            np.zeros(0, bool), np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 2))]
         self.outputs[split] = []
+        pred_vis, pred_xy, score, vis, gt = parts
+        tau = float(self.hparams.tau_px)
+        outcome, dist = classify_frames(pred_vis, pred_xy, vis, gt, tau,
+                                        ignore_flags=tuple(self.hparams.ignore_flags or ()))
+        c = DetectionCounts.from_outcomes(outcome)
+        located = np.isfinite(dist)
+        total = all_reduce_sum([c.tp, c.fp1, c.fp2, c.fn, c.tn, np.sum(dist[located] ** 2), located.sum()])
+        counts = DetectionCounts(*(int(round(v)) for v in total[:5]))
+        rmse = float(np.sqrt(total[5] / total[6])) if total[6] > 0 else float("nan")
+        ranked = np.isin(outcome, [Outcome.TP, Outcome.FP1, Outcome.FP2])
+        pairs = all_gather_concat(np.stack([score[ranked], outcome[ranked] == Outcome.TP], axis=1).reshape(-1, 2))
+        ap = average_precision(pairs[:, 0], pairs[:, 1] > 0, counts.tp + counts.fn)
+        return DetectionReport(counts, rmse, ap, tau)
+
+    def _log_counts(self, split: str) -> None:
+        if not self.outputs[split] and world()[1] == 1:
+            return
+        values = self.report(split).as_dict()
+        # already global (equal on every rank): logged as they are, no second reduction
+        for name in ("precision", "recall", "f1", "accuracy", "ap", "rmse_px", "tp", "fp1", "fp2", "fn", "tn"):
+            value = float(values[name])
+            self.log(f"{split}/{name}", value if value == value else 0.0, prog_bar=name == "f1")
+        if split == "val" and not self.trainer.sanity_checking:
+            self.best["val/f1"] = max(self.best.get("val/f1", -1.0), float(values["f1"]))
+            self.log("val/f1_best", self.best["val/f1"])
 
     def on_validation_epoch_end(self) -> None:
         self._log_counts("val")

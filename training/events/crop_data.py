@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 
-from inference.clipio import Clip
+from inference.clipio import Clip, private_temp_path
 from inference.events.classes import ClassSet
 from inference.events.crop import CropConfig, extract_crops
 from inference.events.features import FeatureConfig, dense_xy, resample_xy, window_labels, window_starts
@@ -62,9 +62,12 @@ def clip_crops(clip: Clip, n_frames: int, features: FeatureConfig, config: CropC
         crops = extract_crops(frames, xy, clip.info.fps, features.ref_fps, config, n_frames, progress=True)
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp.npy")
-        np.save(tmp, crops)
-        tmp.replace(cache)
+        tmp = private_temp_path(cache)  # DDP ranks may extract the same crops at once
+        try:
+            np.save(tmp, crops)
+            tmp.replace(cache)
+        finally:
+            tmp.unlink(missing_ok=True)
     return crops
 
 
@@ -188,5 +191,14 @@ class CropEventDataModule(L.LightningDataModule):
         return DataLoader(self.sets["train"], batch_size=self.batch_size, num_workers=self.num_workers,
                           shuffle=True, generator=torch.Generator().manual_seed(self.seed))
 
+    def prepare_data(self) -> None:
+        """Extract the crops once (one process per node, before every rank's :meth:`setup`)."""
+        for split in ("train", "val"):
+            self.clips(split)
+
     def val_dataloader(self) -> DataLoader:
-        return DataLoader(self.sets["val"], batch_size=self.batch_size, num_workers=self.num_workers)
+        from training.distributed import eval_sampler
+
+        ds = self.sets["val"]
+        return DataLoader(ds, batch_size=self.batch_size, num_workers=self.num_workers,
+                          sampler=eval_sampler(getattr(self, "trainer", None), ds))

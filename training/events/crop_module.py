@@ -22,7 +22,7 @@ from inference.events.crop import CropConfig, CropHitNet
 from inference.events.detector import load_model_file
 from inference.events.features import FeatureConfig
 
-from .module import macro_event_f1
+from .module import log_event_metrics
 
 
 @dataclass(frozen=True)
@@ -149,23 +149,18 @@ class CropHitNetModule(L.LightningModule):
         x, crops, y = batch
         x, crops, y = augment_crop_batch(x, crops, y, self.aug, self.features, self.mirror_perm)
         loss = self.chunk_loss(self(x, crops), y)
-        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y))
+        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y), sync_dist=True)
         return loss
 
     def validation_step(self, batch, _):
         x, crops, y = batch
         logits = self(x, crops)
-        self.log("val/loss", self.chunk_loss(logits, y), on_epoch=True, batch_size=len(y))
+        self.log("val/loss", self.chunk_loss(logits, y), on_epoch=True, batch_size=len(y), sync_dist=True)
         valid = y >= 0
         self._val.append((logits.argmax(-1)[valid].cpu(), y[valid].cpu()))
 
     def on_validation_epoch_end(self) -> None:
-        if not self._val:
-            return
-        pred, y = (torch.cat(t) for t in zip(*self._val))
-        self._val = []
-        self.log("val/acc", (pred == y).float().mean().item())
-        self.log("val/f1", macro_event_f1(pred, y, self.class_set.n), prog_bar=True)
+        log_event_metrics(self, "val", self._val, self.class_set.n)
 
     def configure_optimizers(self):
         head = list(self.net.head.parameters())

@@ -24,10 +24,10 @@ from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector, load_model_file
 from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
-from training.run import resume_path
+from training.run import resume_path, write_eval_results
 
 from .crop_data import CropEventDataModule
-from .run import test_and_export
+from .run import table_rows, test_and_export
 from .evaluate import counts_for, fit_temperature, score_all, tune_decoder
 from .simulate import SimClip, perturb
 
@@ -60,11 +60,12 @@ def calibrate_crop(module, dm: CropEventDataModule) -> float:
 
 
 def crop_tables(det: EventDetector, dm: CropEventDataModule, name: str, split: str = "test",
-                noise_seed: int = 7) -> tuple[dict[str, float], str]:
-    """Event-set metrics of ``split`` with annotated (``gt``) and detector-like (``e2e``) ball positions."""
+                noise_seed: int = 7) -> tuple[dict[str, float], str, list[dict]]:
+    """Event-set metrics of ``split`` with annotated (``gt``) and detector-like (``e2e``) ball positions:
+    the scores, the Markdown tables and one row per table line (results files)."""
     clips = [c.lc.sim for c in dm.clips(split)]
     rng = np.random.default_rng(noise_seed)
-    out, tables = {}, []
+    out, tables, rows = {}, [], []
     for mode, tracks in (("gt", [c.ball for c in clips]), ("e2e", [perturb(c, rng) for c in clips])):
         probs = score_all(frames_scorer(det), clips, tracks, desc=f"{split} {mode}")
         counts = counts_for(probs, clips, dm.class_set, det.ref_fps, det.decode_params)
@@ -72,7 +73,8 @@ def crop_tables(det: EventDetector, dm: CropEventDataModule, name: str, split: s
         what = "annotated ball" if mode == "gt" else "detector-like ball (misses, jitter, false positives)"
         tables.append(format_event_table([(name, counts)], title=f"{split}, {len(clips)} rendered clips, {what}, "
                                          "tolerance ±2 frames at 50 fps (±1 at 25/30, ±2 at 60)"))
-    return out, "\n\n".join(tables)
+        rows += table_rows(counts, model=name, split=split, ball_input=what, table=mode)
+    return out, "\n\n".join(tables), rows
 
 
 def tune_crop(det: EventDetector, dm: CropEventDataModule, passes: int = 2) -> float:
@@ -92,6 +94,8 @@ def train_crop_events(cfg: DictConfig) -> dict[str, float]:
     dev = bool(cfg.trainer.get("fast_dev_run"))
     trainer.fit(module, datamodule=dm, ckpt_path=resume_path(cfg), weights_only=not cfg.get("trust_checkpoint", False))
     metrics = {k: float(v) for k, v in trainer.callback_metrics.items()}
+    if not trainer.is_global_zero:  # DDP: calibration, decoder tuning, export and tables run once, on rank 0
+        return metrics
     best = getattr(trainer.checkpoint_callback, "best_model_path", "") if trainer.checkpoint_callback else ""
     if best and not dev:
         module.load_state_dict(read_checkpoint(best)["state_dict"])
@@ -115,6 +119,10 @@ def evaluate_crop_events(cfg: DictConfig) -> dict[str, float]:
     det = EventDetector.from_blob(load_model_file(cfg.ckpt_path))
     if det.kind != "crop":
         raise ValueError(f"{cfg.ckpt_path} is a {det.kind} model; evaluate it with +experiment=hitnet_<sport>")
-    scores, table = crop_tables(det, dm, f"crop ({Path(cfg.ckpt_path).name})", split=cfg.get("split", "test"))
+    split = str(cfg.get("split") or "test")
+    split = "test" if split == "auto" else split
+    scores, table, rows = crop_tables(det, dm, f"crop ({Path(cfg.ckpt_path).name})", split=split)
     print("\n" + table)
+    paths = write_eval_results([{**r, "checkpoint": str(cfg.ckpt_path)} for r in rows], cfg)
+    print(f"\nresults: {paths[0]}, {paths[1]}")
     return scores

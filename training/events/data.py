@@ -145,7 +145,8 @@ class BalancedSampler(Sampler):
     how a few real clips are mixed with many synthetic ones."""
 
     def __init__(self, labels: torch.Tensor, neg_ratio: float = 1.0, seed: int = 0, on_epoch=None,
-                 weights: torch.Tensor | None = None):
+                 weights: torch.Tensor | None = None, fixed: bool = False):
+        self.seed, self.fixed = seed, fixed  # fixed: the same draw every epoch (validation)
         self.on_epoch = on_epoch  # called at the start of each epoch (e.g. new degraded tracks)
         self.pos = torch.nonzero(labels > 0).flatten()
         self.neg = torch.nonzero(labels == 0).flatten()
@@ -166,6 +167,8 @@ class BalancedSampler(Sampler):
     def __iter__(self):
         if self.on_epoch is not None:
             self.on_epoch()
+        if self.fixed:
+            self.gen.manual_seed(self.seed)
         pos = self.pos if self.weights is None else self._draw(self.pos, len(self.pos))
         idx = torch.cat([pos, self._draw(self.neg, self.n_neg)])
         return iter(idx[torch.randperm(len(idx), generator=self.gen)].tolist())
@@ -399,10 +402,26 @@ class EventDataModule(L.LightningDataModule):
         return torch.as_tensor(w / w.sum())
 
     def val_dataloader(self):
+        """The same windows every epoch (all positives, 3 × as many negatives drawn once); under DDP each
+        rank validates its unpadded shard of them."""
+        from training.distributed import eval_sampler
+
         ds = self.sets["val"]
-        return DataLoader(ds, batch_size=self.batch_size * 4, sampler=BalancedSampler(ds.y, 3.0, self.seed + 1),
-                          num_workers=self.num_workers)
+        sampler = BalancedSampler(ds.y, 3.0, self.seed + 1, fixed=True)
+        return DataLoader(ds, batch_size=self.batch_size * 4, num_workers=self.num_workers,
+                          sampler=eval_sampler(getattr(self, "trainer", None), sampler) or sampler)
 
     def test_dataloader(self):
+        from training.distributed import eval_sampler
+
         self.setup("test")
-        return DataLoader(self.sets["test"], batch_size=self.batch_size * 4, num_workers=self.num_workers)
+        ds = self.sets["test"]
+        return DataLoader(ds, batch_size=self.batch_size * 4, num_workers=self.num_workers,
+                          sampler=eval_sampler(getattr(self, "trainer", None), ds))
+
+    def prepare_data(self) -> None:
+        """Simulate (and cache) the rallies once: Lightning calls this on one process per node before
+        every rank's :meth:`setup`."""
+        if self.source == "synthetic" and self.cache_dir:
+            for split in ("train", "val"):
+                self.raw_clips(split)

@@ -3,6 +3,7 @@ window accuracy and the macro F1 over event classes (``val/f1``, the checkpoint 
 from __future__ import annotations
 
 import lightning as L
+import numpy as np
 import torch
 from torch import nn
 
@@ -10,6 +11,7 @@ from inference.events.classes import ClassSet
 from inference.events.features import FeatureConfig
 from inference.events.network import HitNet
 
+from training.distributed import all_reduce_sum, world
 from training.finetune import freeze as freeze_layers
 from training.finetune import trainable
 
@@ -17,17 +19,45 @@ from .data import AugmentConfig, augment_batch
 
 
 
+def event_counts(pred: torch.Tensor, y: torch.Tensor, n_classes: int) -> np.ndarray:
+    """``(n_classes, 3)`` per class: true positives, predicted, true (pred, y: ``(N,)`` class indices).
+    Counts add up over shards (DDP ranks), ratios do not."""
+    pred, y = torch.as_tensor(pred).reshape(-1), torch.as_tensor(y).reshape(-1)
+    return np.array([[((pred == c) & (y == c)).sum().item(), (pred == c).sum().item(), (y == c).sum().item()]
+                     for c in range(n_classes)], dtype=np.float64)
+
+
+def f1_from_counts(counts: np.ndarray) -> float:
+    """Mean per-class F1 over the event classes 1..n-1 present (true > 0) in :func:`event_counts`."""
+    f1s = [2 * tp / max(p + t, 1) for tp, p, t in np.asarray(counts)[1:] if t > 0]
+    return float(sum(f1s) / max(len(f1s), 1))
+
+
 def macro_event_f1(pred: torch.Tensor, y: torch.Tensor, n_classes: int) -> float:
     """Mean per-class F1 over the event classes 1..n-1 present in ``y`` (class 0, none, left out).
 
     pred, y: ``(N,)`` class indices.
     """
-    f1s = []
-    for c in range(1, n_classes):
-        if (y == c).any():
-            tp = ((pred == c) & (y == c)).sum().item()
-            f1s.append(2 * tp / max((pred == c).sum().item() + (y == c).sum().item(), 1))
-    return float(sum(f1s) / max(len(f1s), 1))
+    return f1_from_counts(event_counts(pred, y, n_classes))
+
+
+def log_event_metrics(module: L.LightningModule, stage: str, outputs: list[tuple], n_classes: int) -> float | None:
+    """Log ``{stage}/acc`` and ``{stage}/f1`` from ``outputs`` [(pred, y), ...] of **every** process (the
+    per-class counts are summed over DDP ranks before the F1); empties ``outputs``; returns the F1."""
+    if not outputs and world()[1] == 1:
+        return None
+    pred, y = ((torch.cat(t) for t in zip(*outputs)) if outputs else (torch.zeros(0, dtype=torch.long),) * 2)
+    outputs.clear()
+    local = np.concatenate([event_counts(pred, y, n_classes).ravel(), [(pred == y).sum().item(), len(y)]])
+    total = all_reduce_sum(local)
+    counts, correct, n = total[:-2].reshape(n_classes, 3), total[-2], total[-1]
+    f1 = f1_from_counts(counts)
+    module.log(f"{stage}/acc", float(correct / n) if n else 0.0)  # global already: no second reduction
+    module.log(f"{stage}/f1", f1, prog_bar=True)
+    if stage == "val" and not module.trainer.sanity_checking:
+        module.best_f1 = max(getattr(module, "best_f1", -1.0), f1)
+        module.log("val/f1_best", module.best_f1)
+    return f1
 
 class HitNetModule(L.LightningModule):
     """Args:
@@ -58,13 +88,13 @@ class HitNetModule(L.LightningModule):
         x, y = batch
         x, y = augment_batch(x, y, self.features, self.aug, self.mirror_perm)
         loss = self.loss(self(x), y)
-        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y))
+        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y), sync_dist=True)
         return loss
 
     def _eval_step(self, batch, stage: str):
         x, y = batch
         logits = self(x)
-        self.log(f"{stage}/loss", self.loss(logits, y), on_epoch=True, batch_size=len(y))
+        self.log(f"{stage}/loss", self.loss(logits, y), on_epoch=True, batch_size=len(y), sync_dist=True)
         self._val.append((logits.argmax(1).cpu(), y.cpu()))
 
     def validation_step(self, batch, _):
@@ -74,12 +104,7 @@ class HitNetModule(L.LightningModule):
         self._eval_step(batch, "test")
 
     def _eval_end(self, stage: str) -> None:
-        if not self._val:
-            return
-        pred, y = (torch.cat(t) for t in zip(*self._val))
-        self._val = []
-        self.log(f"{stage}/acc", (pred == y).float().mean().item())
-        self.log(f"{stage}/f1", macro_event_f1(pred, y, self.class_set.n), prog_bar=True)
+        log_event_metrics(self, stage, self._val, self.class_set.n)
 
     def on_validation_epoch_end(self) -> None:
         self._eval_end("val")

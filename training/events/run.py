@@ -111,10 +111,14 @@ def event_tables(det: EventDetector, dm: EventDataModule, name: str, split: str 
         out.update({f"events/{mode}_{k}": v for k, v in s.items() if k in ("recall", "acc", "prec", "f1")})
         tables.append(format_event_table([(name, counts)], title=f"{split}, {len(clips)} clips, {what}, "
                                          "tolerance ±2 frames at 50 fps (±1 at 25/30, ±2 at 60)"))
-        for c, cname in [(None, "all"), *[(i + 1, n) for i, n in enumerate(counts.classes[1:])]]:
-            rows.append({"model": name, "split": split, "ball_input": what, "table": mode, "class": cname,
-                         **counts.scores(c)})
+        rows += table_rows(counts, model=name, split=split, ball_input=what, table=mode)
     return out, "\n\n".join(tables), rows
+
+
+def table_rows(counts, **common) -> list[dict]:
+    """One results row per class of an event table (``all`` first), with the ``common`` columns."""
+    return [{**common, "class": cname, **counts.scores(c)}
+            for c, cname in [(None, "all"), *[(i + 1, n) for i, n in enumerate(counts.classes[1:])]]]
 
 
 def train_events(cfg: DictConfig) -> dict[str, float]:
@@ -130,6 +134,8 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
     dev = bool(cfg.trainer.get("fast_dev_run"))
     trainer.fit(module, datamodule=dm, ckpt_path=resume_path(cfg), weights_only=not cfg.get("trust_checkpoint", False))
     metrics.update({k: float(v) for k, v in trainer.callback_metrics.items()})
+    if not trainer.is_global_zero:  # DDP: calibration, decoder tuning, export and tables run once, on rank 0
+        return metrics
     best = getattr(trainer.checkpoint_callback, "best_model_path", "") if trainer.checkpoint_callback else ""
     if best and not dev:
         module.load_state_dict(read_checkpoint(best)["state_dict"])

@@ -22,7 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from inference.camera import Camera
-from inference.clipio import BallTrack, HitEvents
+from inference.clipio import BallTrack, HitEvents, private_temp_path
 from inference.court import load_court
 from training.synth.cameras import CameraSpec
 from training.synth.generate import DEFAULT_CAMERA
@@ -92,10 +92,13 @@ def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None =
              for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp")
-        with open(tmp, "wb") as fh:
-            pickle.dump(clips, fh)
-        tmp.replace(cache)
+        tmp = private_temp_path(cache)  # DDP ranks may simulate the same set at once
+        try:
+            with open(tmp, "wb") as fh:
+                pickle.dump(clips, fh)
+            tmp.replace(cache)
+        finally:
+            tmp.unlink(missing_ok=True)
     return clips
 
 
