@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ from .features import (
 )
 from .network import HitNet
 from .physics import PhysicsParams, physics_probs
+from .rally import RallyParams, RallySegment, segment_rally
 
 log = logging.getLogger(__name__)
 
@@ -58,12 +59,17 @@ class EventResult:
         probs: ``(T, C)`` per-frame class probabilities at the clip's frame rate.
         classes: the C class names (``probs`` columns).
         coarse: ``(N,)`` class name of each event (before resolving to a fine label).
+        rally: the point's start/end (:mod:`.rally`); None when not segmented.
+        outside: events detected outside the point (warm-up bounces, the ball after it); empty when
+            ``keep_all`` (then ``events`` holds them too).
     """
 
     events: HitEvents
     probs: np.ndarray
     classes: tuple[str, ...]
     coarse: tuple[str, ...] = ()
+    rally: RallySegment | None = None
+    outside: HitEvents = field(default_factory=HitEvents.empty)
 
 
 def default_weights(sport: str) -> Path:
@@ -189,7 +195,8 @@ class EventDetector:
         return window_probs_to_frames(win_probs, len(feats), self.window, self.last_k)
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
-                players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None) -> EventResult:
+                players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,
+                keep_all: bool = False, rally: RallyParams | None = None) -> EventResult:
         """Events of one clip.
 
         Args:
@@ -199,6 +206,9 @@ class EventDetector:
             players: pose tracks (used by models trained with poses).
             frames: a ``FrameSource`` (needed by crop models, unused by the ball-only ones).
             n_frames: frames in the clip (default: the frame source's length or the track's last frame + 1).
+            keep_all: keep the events outside the point (warm-up bounces, the ball after it) in ``events``;
+                by default they go to ``outside``.
+            rally: segmentation constants (default: the sport's).
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
             raise ValueError(f"fps must be a positive number, got {fps}")
@@ -220,8 +230,16 @@ class EventDetector:
         f_ref, cls = decode(p_ref, self.ref_fps or fps, self.class_set, self.decode_params)
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
+        seg = segment_rally(dense_xy(ball, n_frames), fps, events.frame, events.event, hits=self.class_set.rules.hits,
+                            aspect=width / height, params=rally or RallyParams.for_sport(self.class_set.sport))
+        outside = HitEvents.empty()
+        if not keep_all:
+            out = ~seg.inside
+            outside = HitEvents(events.frame[out], events.event[out])
+            events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
+            coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
         return EventResult(events, probs_to_clip(p_ref, n_frames, fps, self.ref_fps), self.class_set.classes,
-                           coarse)
+                           coarse, seg, outside)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,
