@@ -33,7 +33,9 @@ class RallyParams:
     Attributes:
         away_s, min_travel: the track's serve test (:func:`serve_candidate`); behind_s, leave_ratio,
             hit_travel: a decoded hit is the serve when the ball then stays ``leave_ratio`` × (how far it
-            moved in the ``behind_s`` before) and ``hit_travel`` away.
+            moved in the ``behind_s`` before) and ``hit_travel`` away, and its image speed during the
+            ``speed_s`` after is ``speed_ratio`` × that before (a catch is not a serve); of such hits within
+            ``serve_window_s`` of the first, the one with the fastest ball after it (not the toss).
         snap_s: a decoded racket hit this close to the serve test's frame is the serve.
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
         gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
@@ -47,6 +49,9 @@ class RallyParams:
     behind_s: float = 1.0
     leave_ratio: float = 1.0
     hit_travel: float = 0.02
+    speed_s: float = 0.12
+    speed_ratio: float = 1.5
+    serve_window_s: float = 1.2
     snap_s: float = 0.15
     serve_bounce: bool = False
     serve_bounce_s: float = 1.2
@@ -211,11 +216,23 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     reach = int(round(params.away_s[0] * fps))
     start, source = None, "none"
     away, back = away_and_back(xy, fps, aspect, params)
-    for h in hit_frames:  # the first decoded hit after which the ball stays away
+    p = _scaled(xy, aspect)
+    v = np.full(T, np.nan)
+    v[1:] = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    k = max(2, int(round(params.speed_s * fps)))
+    passing, speed = [], []
+    for h in hit_frames:  # decoded hits after which the ball is fast and stays away
         w = slice(max(h - 1, 0), min(h + 2, T))
-        if len(away[w]) and (away[w] > np.maximum(params.hit_travel, params.leave_ratio * back[w])).any():
-            start, source = int(h), "hit"
-            break
+        before, after = v[max(h - k + 1, 0):h + 1], v[h + 2:h + 2 + k]
+        if np.isfinite(after).sum() < 2:
+            continue
+        fast = not np.isfinite(before).any() or np.nanmedian(after) > params.speed_ratio * np.nanmedian(before)
+        if fast and len(away[w]) and (away[w] > np.maximum(params.hit_travel, params.leave_ratio * back[w])).any():
+            passing.append(int(h))
+            speed.append(float(np.nanmedian(after)))
+    if passing:  # the toss or the drop before a serve can pass too: the fastest within serve_window_s
+        sel = [i for i, h in enumerate(passing) if h - passing[0] <= params.serve_window_s * fps]
+        start, source = passing[max(sel, key=lambda i: speed[i])], "hit"
     cand = serve_candidate(xy, fps, aspect, params) if start is None else None
     if cand is not None:
         near = hit_frames[(hit_frames >= cand - snap) & (hit_frames <= cand + reach + snap)]

@@ -1014,7 +1014,8 @@ class _Planner:
         t_serve = _uniform(rng, cfg.lead)
         if cfg.around.enabled:  # only then: the default rallies draw exactly as before
             warm = self.warmup(server)
-            t_serve += warm[-1].t[-1] if warm else 0.0
+            if warm:  # the serve's own drop or toss starts a pause after the last catch
+                t_serve = max(t_serve, float(warm[-1].t[-1]) + _uniform(rng, cfg.around.pause) + t_local)
             for f in warm:
                 self.add_piece(f, last=False)
         shift = t_serve - t_local
