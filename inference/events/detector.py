@@ -38,6 +38,7 @@ from .features import (
     resample_xy,
     window_probs_to_frames,
 )
+from .gaps import bridge_events
 from .network import HitNet
 from .physics import PhysicsParams, physics_probs
 from .rally import RallyParams, RallySegment, segment_rally
@@ -62,6 +63,8 @@ class EventResult:
         rally: the point's start/end (:mod:`.rally`); None when not segmented.
         outside: events detected outside the point (warm-up bounces, the ball after it); empty when
             ``keep_all`` (then ``events`` holds them too).
+        uncertainty: ``(N,)`` per event of ``events``, frames: the uncertainty of a racket hit timed from the
+            flights on both sides of a gap in the track (:mod:`.gaps`); NaN where the model's timing stands.
     """
 
     events: HitEvents
@@ -70,6 +73,7 @@ class EventResult:
     coarse: tuple[str, ...] = ()
     rally: RallySegment | None = None
     outside: HitEvents = field(default_factory=HitEvents.empty)
+    uncertainty: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def default_weights(sport: str) -> Path:
@@ -229,8 +233,16 @@ class EventDetector:
         p_ref = self.ref_probs(ball, n_frames, fps, camera=camera, players=players, frames=frames)
         f_ref, cls = decode(p_ref, self.ref_fps or fps, self.class_set, self.decode_params)
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
+        xy = dense_xy(ball, n_frames)
+        hit = np.isin(cls, [self.class_set.index(h) for h in self.class_set.rules.hits])
+        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height)
+        frames_out = np.where(hit, bridged, frames_out)  # racket hits in a gap: timed from both flights
+        sigma = np.where(hit, sigma, np.nan)
+        order = np.argsort(frames_out, kind="stable")
+        frames_out, cls, sigma = frames_out[order], cls[order], sigma[order]
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
-        seg = segment_rally(dense_xy(ball, n_frames), fps, events.frame, events.event, hits=self.class_set.rules.hits,
+        sigma = sigma[:len(events)]
+        seg = segment_rally(xy, fps, events.frame, events.event, hits=self.class_set.rules.hits,
                             aspect=width / height, params=rally or RallyParams.for_sport(self.class_set.sport))
         outside = HitEvents.empty()
         if not keep_all:
@@ -238,8 +250,9 @@ class EventDetector:
             outside = HitEvents(events.frame[out], events.event[out])
             events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
             coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
+            sigma = sigma[seg.inside]
         return EventResult(events, probs_to_clip(p_ref, n_frames, fps, self.ref_fps), self.class_set.classes,
-                           coarse, seg, outside)
+                           coarse, seg, outside, sigma)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,

@@ -149,3 +149,24 @@ def test_resampled_track_keeps_event_times():
         assert to_ref_frames(np.array([int(fps)]), fps, 50.0)[0] == 50
     track = BallTrack(np.arange(5), np.ones(5, np.int8), np.full((5, 2), 0.5))
     assert dense_xy(track, 5).shape == (5, 2)
+
+
+def test_contact_in_a_gap_is_timed_from_both_flights():
+    """A V-shaped track (a hit at frame 40.4) with frames 36–44 missing: the contact is found within a
+    frame, with an uncertainty; without a gap, or with one side too short, nothing is moved."""
+    from inference.events.gaps import bridge_contact, bridge_events
+
+    fps, hit = 50.0, 40.4
+    t = np.arange(80, dtype=float)
+    xy = np.stack([0.3 + 0.004 * t, 0.5 + 0.006 * np.abs(t - hit) - 0.00005 * (t - hit) ** 2], axis=1)
+    full = xy.copy()
+    xy[36:45] = np.nan
+    tc, sigma = bridge_contact(xy, fps, 42)
+    assert abs(tc - hit) < 1.0 and 0.5 <= sigma <= 5.5
+    moved, sig = bridge_events(xy, fps, np.array([43, 70]))
+    assert abs(moved[0] - hit) <= 1 and np.isfinite(sig[0])
+    assert moved[1] == 70 and np.isnan(sig[1])  # no gap at 70: the model's frame stands
+    assert bridge_contact(full, fps, 40) is None
+    short = xy.copy()
+    short[46:] = np.nan
+    assert bridge_contact(short, fps, 40) is None
