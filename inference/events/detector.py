@@ -61,8 +61,8 @@ class EventResult:
         classes: the C class names (``probs`` columns).
         coarse: ``(N,)`` class name of each event (before resolving to a fine label).
         rally: the point's start/end (:mod:`.rally`); None when not segmented.
-        outside: events detected outside the point (warm-up bounces, the ball after it); empty when
-            ``keep_all`` (then ``events`` holds them too).
+        outside: events judged outside the point (warm-up bounces, the ball after it); ``events`` holds
+            them too unless ``predict(..., keep_all=False)``.
         uncertainty: ``(N,)`` per event of ``events``, frames: the uncertainty of a racket hit timed from the
             flights on both sides of a gap in the track (:mod:`.gaps`); NaN where the model's timing stands.
     """
@@ -200,7 +200,7 @@ class EventDetector:
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
                 players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,
-                keep_all: bool = False, rally: RallyParams | None = None) -> EventResult:
+                keep_all: bool = True, rally: RallyParams | None = None) -> EventResult:
         """Events of one clip.
 
         Args:
@@ -210,8 +210,9 @@ class EventDetector:
             players: pose tracks (used by models trained with poses).
             frames: a ``FrameSource`` (needed by crop models, unused by the ball-only ones).
             n_frames: frames in the clip (default: the frame source's length or the track's last frame + 1).
-            keep_all: keep the events outside the point (warm-up bounces, the ball after it) in ``events``;
-                by default they go to ``outside``.
+            keep_all: keep the events judged outside the point (warm-up bounces, the ball after it) in
+                ``events`` (the default: on detector tracks the segmentation is not reliable yet); False
+                leaves them out. Either way ``outside`` lists them.
             rally: segmentation constants (default: the sport's).
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
@@ -244,10 +245,8 @@ class EventDetector:
         sigma = sigma[:len(events)]
         seg = segment_rally(xy, fps, events.frame, events.event, hits=self.class_set.rules.hits,
                             aspect=width / height, params=rally or RallyParams.for_sport(self.class_set.sport))
-        outside = HitEvents.empty()
+        outside = HitEvents(events.frame[~seg.inside], events.event[~seg.inside])
         if not keep_all:
-            out = ~seg.inside
-            outside = HitEvents(events.frame[out], events.event[out])
             events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
             coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
             sigma = sigma[seg.inside]

@@ -38,8 +38,8 @@ class PipelineConfig:
         trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
-        all_events: keep the events outside the point (warm-up bounces, the ball after it) in events.csv;
-            by default they are listed in rally.yaml only.
+        rally_only: leave the events judged outside the point (warm-up bounces, the ball after it) out of
+            events.csv (rally.yaml lists them either way).
         pose: pose backend (``auto``: MoveNet if installed, ``none``: no players, or a backend name).
         pose_model: model file for the pose backend (None: its default).
         method: 3D reconstruction method.
@@ -54,7 +54,7 @@ class PipelineConfig:
     step: int = 3
     batch_size: int = 1
     events: Path | None = None
-    all_events: bool = False
+    rally_only: bool = False
     pose: str = "auto"
     pose_model: Path | None = None
     method: str = "joint"
@@ -206,7 +206,7 @@ def _events_run(ctx: Context) -> Outcome:
     try:
         result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
                              players=players if players is not None and len(players) else None, frames=frames,
-                             keep_all=ctx.cfg.all_events)
+                             keep_all=not ctx.cfg.rally_only)
     finally:
         frames.close()
     clip.write_events(result.events)
@@ -301,7 +301,7 @@ def build_stages() -> list[Stage]:
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
                                      "weights": _events_weights(ctx)},
-              lambda ctx: {"sport": ctx.clip.info.sport, "all_events": ctx.cfg.all_events},
+              lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},

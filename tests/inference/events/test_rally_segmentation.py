@@ -102,10 +102,10 @@ def test_detector_reports_rally_events_apart_and_keep_all():
 
     c = simulate_clip("padel", 11, around=True, fps=50.0)
     det = EventDetector.from_checkpoint(None, sport="padel")
-    r = det.predict(c.ball, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)
-    full = det.predict(c.ball, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True)
+    r = det.predict(c.ball, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=False)
+    full = det.predict(c.ball, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)  # keeps all
     assert len(r.events) + len(r.outside) == len(full.events)
-    assert len(full.outside) == 0
+    assert np.array_equal(full.outside.frame, r.outside.frame)
     assert r.rally is not None and r.rally.start <= r.rally.end
     if len(r.events):
         assert r.events.frame.min() >= r.rally.start - int(1.2 * c.fps) and r.events.frame.max() <= r.rally.end
