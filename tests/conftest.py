@@ -102,3 +102,24 @@ def wait_until(predicate: Callable[[], bool], timeout_s: float = WAIT_CEILING_S,
 def port() -> int:
     """A free local port for a viser server."""
     return free_port()
+
+
+def compose_cfg(overrides: list[str], out: Path, name: str = "train"):
+    """The config ``python {name}.py OVERRIDES`` composes (Hydra, as the script would), writing under ``out``."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import open_dict
+
+    root = Path(__file__).resolve().parents[1]
+    GlobalHydra.instance().clear()
+    os.environ.setdefault("PROJECT_ROOT", str(root))
+    with initialize_config_dir(config_dir=str(root / "conf"), version_base="1.3"):
+        cfg = compose(config_name=name, return_hydra_config=True, overrides=overrides)
+    with open_dict(cfg):
+        cfg.paths.output_dir = str(out)
+        cfg.hydra.runtime.output_dir = str(out)
+        if not any(o.startswith("paths.log_dir=") for o in overrides):
+            cfg.paths.log_dir = str(out)
+    HydraConfig().set_config(cfg)
+    return cfg

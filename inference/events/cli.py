@@ -19,6 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ball", type=Path, help="ball.csv to read instead of the clip's")
     p.add_argument("--no-camera", action="store_true", help="ignore camera.yaml (grouped classes → default label)")
     p.add_argument("--out", type=Path, help="write here instead of the clip's events.csv")
+    p.add_argument("--rally-only", action="store_true",
+                   help="leave the events judged outside the point (warm-up bounces, the ball after it) out of "
+                   "events.csv; rally.yaml lists them either way")
     p.set_defaults(func=run)
 
 
@@ -43,13 +46,20 @@ def run(args: argparse.Namespace) -> int:
     frames = clip.frames(cache_size=0) if det.kind == "crop" else None  # the crop model looks at the video
     try:
         result = det.predict(ball, info.fps, info.width, info.height, camera=camera, n_frames=n_frames,
-                             frames=frames)
+                             frames=frames, keep_all=not args.rally_only)
     finally:
         if frames is not None:
             frames.close()
     path = write_events_csv(args.out or clip.events_path, result.events)
+    from .rally import write_rally_yaml
+
+    rally_path = write_rally_yaml(path.parent / "rally.yaml", result.rally, info.fps,
+                                  list(zip(result.outside.frame.tolist(), result.outside.event.tolist())))
     counts = {}
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
-    print(f"{clip.root.name}: {len(result.events)} events {counts}; wrote {path}")
+    seg = result.rally
+    print(f"{clip.root.name}: rally frames {seg.start}–{seg.end}, {len(result.events)} events {counts} "
+          f"({len(result.outside)} judged outside the point{'' if args.rally_only else ', kept'}); wrote {path} "
+          f"and {rally_path}")
     return 0

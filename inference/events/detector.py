@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +38,10 @@ from .features import (
     resample_xy,
     window_probs_to_frames,
 )
+from .gaps import bridge_events
 from .network import HitNet
 from .physics import PhysicsParams, physics_probs
+from .rally import RallyParams, RallySegment, segment_rally
 
 log = logging.getLogger(__name__)
 
@@ -58,12 +60,20 @@ class EventResult:
         probs: ``(T, C)`` per-frame class probabilities at the clip's frame rate.
         classes: the C class names (``probs`` columns).
         coarse: ``(N,)`` class name of each event (before resolving to a fine label).
+        rally: the point's start/end (:mod:`.rally`); None when not segmented.
+        outside: events judged outside the point (warm-up bounces, the ball after it); ``events`` holds
+            them too unless ``predict(..., keep_all=False)``.
+        uncertainty: ``(N,)`` per event of ``events``, frames: the uncertainty of a racket hit timed from the
+            flights on both sides of a gap in the track (:mod:`.gaps`); NaN where the model's timing stands.
     """
 
     events: HitEvents
     probs: np.ndarray
     classes: tuple[str, ...]
     coarse: tuple[str, ...] = ()
+    rally: RallySegment | None = None
+    outside: HitEvents = field(default_factory=HitEvents.empty)
+    uncertainty: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def default_weights(sport: str) -> Path:
@@ -189,7 +199,8 @@ class EventDetector:
         return window_probs_to_frames(win_probs, len(feats), self.window, self.last_k)
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
-                players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None) -> EventResult:
+                players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,
+                keep_all: bool = True, rally: RallyParams | None = None) -> EventResult:
         """Events of one clip.
 
         Args:
@@ -199,6 +210,10 @@ class EventDetector:
             players: pose tracks (used by models trained with poses).
             frames: a ``FrameSource`` (needed by crop models, unused by the ball-only ones).
             n_frames: frames in the clip (default: the frame source's length or the track's last frame + 1).
+            keep_all: keep the events judged outside the point (warm-up bounces, the ball after it) in
+                ``events`` (the default: on detector tracks the segmentation is not reliable yet); False
+                leaves them out. Either way ``outside`` lists them.
+            rally: segmentation constants (default: the sport's).
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
             raise ValueError(f"fps must be a positive number, got {fps}")
@@ -219,9 +234,24 @@ class EventDetector:
         p_ref = self.ref_probs(ball, n_frames, fps, camera=camera, players=players, frames=frames)
         f_ref, cls = decode(p_ref, self.ref_fps or fps, self.class_set, self.decode_params)
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
+        xy = dense_xy(ball, n_frames)
+        hit = np.isin(cls, [self.class_set.index(h) for h in self.class_set.rules.hits])
+        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height)
+        frames_out = np.where(hit, bridged, frames_out)  # racket hits in a gap: timed from both flights
+        sigma = np.where(hit, sigma, np.nan)
+        order = np.argsort(frames_out, kind="stable")
+        frames_out, cls, sigma = frames_out[order], cls[order], sigma[order]
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
+        sigma = sigma[:len(events)]
+        seg = segment_rally(xy, fps, events.frame, events.event, hits=self.class_set.rules.hits,
+                            aspect=width / height, params=rally or RallyParams.for_sport(self.class_set.sport))
+        outside = HitEvents(events.frame[~seg.inside], events.event[~seg.inside])
+        if not keep_all:
+            events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
+            coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
+            sigma = sigma[seg.inside]
         return EventResult(events, probs_to_clip(p_ref, n_frames, fps, self.ref_fps), self.class_set.classes,
-                           coarse)
+                           coarse, seg, outside, sigma)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,

@@ -36,6 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="allow a detector checkpoint that holds pickled Python objects (unpickling runs code "
                    "stored in the file: only for files you trust); without it such a file is refused")
     p.add_argument("--events", type=Path, help="hit-event model file (default: the shipped model of the sport)")
+    p.add_argument("--rally-only", action="store_true",
+                   help="leave the events judged outside the point (the server's bounces before the serve, the ball "
+                   "after it) out of events.csv; rally.yaml lists them with the point's start and end either way")
     p.add_argument("--pose", default="auto", help="pose backend: auto (MoveNet if installed), none, movenet, "
                    "rtmpose, rtmo")
     p.add_argument("--pose-model", type=Path, help="model file of the pose backend")
@@ -61,7 +64,7 @@ def _config(args: argparse.Namespace):
 
     return PipelineConfig(detector=args.detector_model, detector_weights=args.detector,
                           trust_checkpoint=args.trust_checkpoint, step=args.step,
-                          batch_size=args.batch_size, events=args.events, pose=args.pose,
+                          batch_size=args.batch_size, events=args.events, rally_only=args.rally_only, pose=args.pose,
                           pose_model=args.pose_model, method=args.method, device=args.device,
                           overwrite=args.overwrite, progress=not args.no_progress,
                           auto_court=args.court_points == "auto")

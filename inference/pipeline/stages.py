@@ -38,6 +38,8 @@ class PipelineConfig:
         trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
+        rally_only: leave the events judged outside the point (warm-up bounces, the ball after it) out of
+            events.csv (rally.yaml lists them either way).
         pose: pose backend (``auto``: MoveNet if installed, ``none``: no players, or a backend name).
         pose_model: model file for the pose backend (None: its default).
         method: 3D reconstruction method.
@@ -53,6 +55,7 @@ class PipelineConfig:
     step: int = 3
     batch_size: int = 1
     events: Path | None = None
+    rally_only: bool = False
     pose: str = "auto"
     pose_model: Path | None = None
     method: str = "joint"
@@ -232,10 +235,12 @@ def _events_run(ctx: Context) -> Outcome:
     frames = clip.frames(cache_size=16)
     try:
         result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
-                             players=players if players is not None and len(players) else None, frames=frames)
+                             players=players if players is not None and len(players) else None, frames=frames,
+                             keep_all=not ctx.cfg.rally_only)
     finally:
         frames.close()
     clip.write_events(result.events)
+    _write_rally(clip, result)
     counts: dict[str, int] = {}
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
@@ -244,6 +249,15 @@ def _events_run(ctx: Context) -> Outcome:
                          "(label or re-detect the ball) or pass another --events model")
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
                    ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")")
+
+
+def _write_rally(clip, result) -> None:
+    """rally.yaml beside events.csv: the point's start/end and the events outside it."""
+    from inference.events.rally import write_rally_yaml
+
+    if result.rally is not None:
+        write_rally_yaml(clip.root / "rally.yaml", result.rally, clip.info.fps,
+                         list(zip(result.outside.frame.tolist(), result.outside.event.tolist())))
 
 
 def _events_weights(ctx: Context) -> Path:
@@ -321,7 +335,8 @@ def build_stages() -> list[Stage]:
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
                                      "weights": _events_weights(ctx)},
-              lambda ctx: {"sport": ctx.clip.info.sport}, lambda ctx: [ctx.clip.events_path], _events_run,
+              lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
+              lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
               lambda ctx: {"pose": ctx.cfg.pose}, lambda ctx: [ctx.clip.players_path], _players_run),

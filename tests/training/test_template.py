@@ -8,27 +8,13 @@ import os
 from pathlib import Path
 
 import pytest
+from conftest import compose_cfg
 import torch
 import yaml
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
-from hydra.core.hydra_config import HydraConfig
-from omegaconf import OmegaConf, open_dict
+from omegaconf import OmegaConf
 
 ROOT = Path(__file__).resolve().parents[2]
 DEBUGS = sorted(p.stem for p in (ROOT / "conf" / "debug").glob("*.yaml"))
-
-
-def compose_cfg(overrides: list[str], out: Path, name: str = "train"):
-    """The config ``python {name}.py OVERRIDES`` composes, writing under ``out``."""
-    GlobalHydra.instance().clear()
-    os.environ.setdefault("PROJECT_ROOT", str(ROOT))
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name=name, return_hydra_config=True, overrides=overrides)
-    with open_dict(cfg):
-        cfg.paths.output_dir = cfg.hydra.runtime.output_dir = cfg.paths.log_dir = str(out)
-    HydraConfig().set_config(cfg)
-    return cfg
 
 
 @pytest.fixture(scope="module")

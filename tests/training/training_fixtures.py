@@ -3,37 +3,18 @@ would clash with tests/conftest.py): Hydra configs composed as train.py / eval.p
 the way annotators leave it (the labeler's clip folders, no manifest)."""
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
-from hydra.core.hydra_config import HydraConfig
-from omegaconf import open_dict
+from conftest import compose_cfg
 
 from inference.clipio import BallTrack, Clip, write_video
 from training.synth.generate import SynthConfig, generate_clip
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def compose_cfg(overrides: list[str], out: Path, name: str = "train"):
-    """The config ``python {name}.py OVERRIDES`` composes, with its output folder at ``out``."""
-    GlobalHydra.instance().clear()
-    os.environ.setdefault("PROJECT_ROOT", str(ROOT))
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name=name, return_hydra_config=True, overrides=overrides)
-    with open_dict(cfg):
-        cfg.paths.output_dir = str(out)
-        cfg.hydra.runtime.output_dir = str(out)
-        if not any(o.startswith("paths.log_dir=") for o in overrides):
-            cfg.paths.log_dir = str(out)
-    HydraConfig().set_config(cfg)
-    return cfg
 
 
 def _resize_video(clip: Clip, size: tuple[int, int]) -> None:

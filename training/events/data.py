@@ -271,6 +271,8 @@ class EventDataModule(L.LightningDataModule):
         n_train, n_val, n_test, seed: synthetic clip counts; seeds ``seed``, ``seed + 1``, ``seed + 2``.
         on_unmapped: ``error`` or ``warn`` for labels the class set does not cover.
         neg_ratio: negatives per positive per epoch. cache_dir: simulated clips are cached here.
+        around: share of the synthetic clips simulated with the server's bounces before the serve and the
+            ball after the point (not events: the model learns they are none).
         degrade: :class:`~training.events.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
@@ -282,7 +284,7 @@ class EventDataModule(L.LightningDataModule):
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
                  degrade: dict | None = None, root_weights: list[float] | None = None,
-                 split_seed: int | None = None):
+                 split_seed: int | None = None, around: float = 0.0):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -294,6 +296,9 @@ class EventDataModule(L.LightningDataModule):
         self.features = FeatureConfig.from_dict(features or {})
         self.window, self.last_k, self.source, self.root = window, last_k, source, root
         self.root_weights, self.split_seed = root_weights, seed if split_seed is None else split_seed
+        if not 0.0 <= float(around) <= 1.0:
+            raise ValueError(f"data.around must be a fraction in [0, 1], got {around!r}")
+        self.around = float(around)
         self._sources = None
         self.clip_source: dict[str, list[int]] = {}  # per split: the root index of each clip
         self.counts = {"train": n_train, "val": n_val, "test": n_test}
@@ -325,7 +330,12 @@ class EventDataModule(L.LightningDataModule):
             self.clip_source[split] = [k for _, k in pairs]
         else:
             offset = {"train": 0, "val": 1, "test": 2}[split]
-            clips = simulate_clips(self.sport, self.counts[split], self.seed * 10 + offset, self.cache_dir)
+            n = self.counts[split]
+            n_around = int(round(self.around * n))
+            clips = simulate_clips(self.sport, n - n_around, self.seed * 10 + offset, self.cache_dir) if n > n_around \
+                else []
+            if n_around:  # rallies with the server's bounces before the serve and the ball after the point
+                clips += simulate_clips(self.sport, n_around, self.seed * 10 + offset + 5, self.cache_dir, around=True)
         return clips
 
     def labelled(self, split: str) -> list[LabelledClip]:

@@ -69,6 +69,10 @@ class DegradeConfig:
         every_epoch: draw new degradations each training epoch (else once).
         val_copies: degraded copies of each validation clip used for checkpointing, temperature and
             decoder tuning (beside the clean clip).
+        integer_px: round the detections to whole pixels (trackers that report a heatmap's argmax).
+        far_miss: probability that a detection above ``far_y`` (normalised image height: the far end,
+            where the ball is a few pixels) is missed; top_crop: the image's top ``top_crop`` is out of the
+            frame (lobs leaving it). All three are off by default (the default draws are unchanged).
     """
 
     enabled: bool = True
@@ -87,9 +91,14 @@ class DegradeConfig:
     p_smooth: float = 0.8
     every_epoch: bool = True
     val_copies: int = 1
+    integer_px: bool = False
+    far_miss: float = 0.0
+    far_y: float = 0.45
+    top_crop: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("p_clean", "p_occlude_near", "p_occlude_far", "p_gap_event", "miss_frac", "outlier_frac", "p_smooth"):
+        for name in ("p_clean", "p_occlude_near", "p_occlude_far", "p_gap_event", "miss_frac", "outlier_frac", "p_smooth",
+                     "far_miss", "far_y", "top_crop"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
                 raise ValueError(f"DegradeConfig.{name} must be a probability/fraction in [0, 1], got {v!r}")
@@ -229,8 +238,17 @@ def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = Degrade
     occluded = occlusion_mask(sim, rng, cfg) & visible
     missed = miss_runs(visible, occluded, sim.fps, rng, cfg)
     detected = visible & ~occluded & ~missed
+    if cfg.far_miss > 0:  # the far end: a small ball, lost more often
+        far = detected & (ball.xy[:, 1] < cfg.far_y)
+        missed |= far & (rng.random(n) < cfg.far_miss)
+        detected &= ~missed
+    if cfg.top_crop > 0:  # lobs leave the frame
+        missed |= detected & (ball.xy[:, 1] < cfg.top_crop)
+        detected &= ~missed
     outlier = outlier_positions(xy, detected, rng, cfg)
     xy = np.clip(xy, 0.0, size)
+    if cfg.integer_px:
+        xy = np.round(xy)
     vis = detected.astype(np.int8)
     xy[~detected] = np.nan
     out = BallTrack(np.arange(n), vis, xy / size)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,13 +27,13 @@ from inference.court import load_court
 from training.synth.cameras import CameraSpec
 from training.synth.generate import DEFAULT_CAMERA
 from training.synth.groundtruth import event_table, inside_image
-from training.synth.rally import default_config, simulate_rally
+from training.synth.rally import REAL_AROUND, default_config, simulate_rally
 
 
 @dataclass
 class SimClip:
     """One simulated clip: ``ball`` (every frame a row), ``events`` (fine labels), ``fps``, image size,
-    ``camera`` (ground truth) and ``name``."""
+    ``camera`` (ground truth) and ``name``; ``rally``: (serve frame, dead-ball frame) when known."""
 
     name: str
     fps: float
@@ -43,6 +43,7 @@ class SimClip:
     ball: BallTrack
     events: HitEvents
     camera: Camera
+    rally: tuple[int, int] | None = None
 
 
 def project_track(rally, camera: Camera) -> BallTrack:
@@ -64,31 +65,40 @@ def project_track(rally, camera: Camera) -> BallTrack:
     return BallTrack(np.arange(n), vis, np.clip(xy, 0, 1))
 
 
-def simulate_clip(sport: str, seed: int, court=None) -> SimClip:
-    """One rally with a randomised camera; the same seed gives the same clip."""
+def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: float | None = None) -> SimClip:
+    """One rally with a randomised camera; the same seed gives the same clip. ``around``: add the
+    server's bounces before the serve and the ball after the point (not events; ``rally`` marks the
+    point); ``fps``: fix the frame rate."""
     court = court or load_court(sport)
     r_cam, r_rally = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     spec = CameraSpec.preset(DEFAULT_CAMERA[sport]).randomised(r_cam)
+    if fps is not None:
+        spec = replace(spec, fps=float(fps))
     camera = spec.build(court)
-    rally = simulate_rally(court, spec.fps, r_rally, sport=sport, config=default_config(sport))
+    config = default_config(sport)
+    if around:
+        config = replace(config, around=REAL_AROUND)
+    rally = simulate_rally(court, spec.fps, r_rally, sport=sport, config=config)
     return SimClip(f"{sport}_{seed}", spec.fps, spec.width, spec.height, rally.n_frames,
-                   project_track(rally, camera), event_table(rally), camera)
+                   project_track(rally, camera), event_table(rally), camera, rally.rally_frames())
 
 
 def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None = None,
-                   progress: bool = True) -> list[SimClip]:
-    """``n`` clips with seeds ``seed * 1_000_003 + k``; cached as a pickle under ``cache_dir``."""
+                   progress: bool = True, around: bool = False, fps: float | None = None) -> list[SimClip]:
+    """``n`` clips with seeds ``seed * 1_000_003 + k``; cached as a pickle under ``cache_dir``
+    (``around``, ``fps``: see :func:`simulate_clip`)."""
     if n <= 0:
         raise ValueError(f"need at least one clip, got n={n}")
     cache = None
     if cache_dir is not None:
-        key = hashlib.sha1(json.dumps([sport, n, seed, 1]).encode()).hexdigest()[:10]
+        parts = [sport, n, seed, 1] + ([around, fps] if around or fps else [])
+        key = hashlib.sha1(json.dumps(parts).encode()).hexdigest()[:10]
         cache = Path(cache_dir) / f"sim_{sport}_{n}_{seed}_{key}.pkl"
         if cache.is_file():
             with open(cache, "rb") as fh:
                 return pickle.load(fh)
     court = load_court(sport)
-    clips = [simulate_clip(sport, seed * 1_000_003 + k, court)
+    clips = [simulate_clip(sport, seed * 1_000_003 + k, court, around, fps)
              for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)

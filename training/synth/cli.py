@@ -28,6 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="h264 (default, realistic compression), mp4v (fast) or frames (JPEG folder)")
     p.add_argument("--max-frames", type=int, help="cut clips to this many frames")
     p.add_argument("--click-noise", type=float, default=1.0, help="±px noise on court_points.csv (default 1)")
+    p.add_argument("--around-point", action="store_true",
+                   help="add the server's bounces before the serve and the ball after the point (not events; "
+                   "gt/rally.yaml marks the point)")
     p.set_defaults(func=run)
 
 
@@ -46,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--clips must be >= 1")
     config = SynthConfig(sport=args.sport, camera=args.camera, randomise_camera=not args.fixed_camera,
                          fps=args.fps, width=width, height=height, randomise_look=not args.plain,
-                         codec=args.codec, click_noise_px=args.click_noise, max_frames=args.max_frames)
+                         codec=args.codec, click_noise_px=args.click_noise, max_frames=args.max_frames,
+                         around_point=args.around_point)
     frames = [0]
     t0 = time.perf_counter()
     with tqdm(total=args.clips, unit="clip", desc=f"synth {args.sport}") as bar:

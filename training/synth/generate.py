@@ -24,7 +24,7 @@ from inference.skeleton import COCO17
 from .bodies import PlayerPose, articulate
 from .cameras import CameraSpec
 from .groundtruth import ball_3d_table, court_point_table, event_table, inactive_ball_table
-from .rally import default_config, simulate_rally
+from .rally import REAL_AROUND, default_config, simulate_rally
 from .render import Appearance, CourtRenderer, FrameInfo, ball_exposure
 from .types import Rally
 
@@ -48,6 +48,9 @@ class SynthConfig:
         max_frames: cut long rallies to this many frames (None: keep all).
         look_shift: draw the look from another distribution (:meth:`Appearance.shifted`), e.g. a stand-in
             for real footage in fine-tuning benchmarks; the default looks are unchanged.
+        around_point: the server's bounces before the serve and the ball after the point (rolling,
+            caught, knocked to the side), as real clips hold them; they are not events, and
+            ``gt/rally.yaml`` marks the point. Off by default (the default clips are unchanged).
     """
 
     sport: str = "padel"
@@ -63,6 +66,7 @@ class SynthConfig:
     click_noise_px: float = 1.0
     max_frames: int | None = None
     look_shift: bool = False
+    around_point: bool = False
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -161,8 +165,10 @@ class SynthScene:
         look = Appearance.sample(r_look, config.sport) if config.randomise_look else Appearance.plain(config.sport)
         if config.look_shift:
             look = look.shifted(np.random.default_rng([seed, 7]))  # its own stream: the default draws are unchanged
-        rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport,
-                                     config=default_config(config.sport)), config.max_frames)
+        rally_cfg = default_config(config.sport)
+        if config.around_point:
+            rally_cfg = replace(rally_cfg, around=REAL_AROUND)
+        rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport, config=rally_cfg), config.max_frames)
         poses = [articulate(p, spec.fps, r_body, sport=config.sport) for p in rally.players]
         renderer = CourtRenderer(court, camera, look, seed=int(seq.generate_state(1)[0]))
         return cls(court, spec, camera, look, rally, poses, renderer, r_points)
@@ -218,6 +224,13 @@ def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
     clip.write_camera(camera, gt=True)
     clip.write_ball_3d(ball_3d_table(rally), gt=True)
     clip.write_players(player_tracks(infos, poses, size), gt=True)
+    if config.around_point and rally.rally_frames() is not None:
+        from inference.events.rally import RallySegment, write_rally_yaml
+
+        start, end = rally.rally_frames()
+        write_rally_yaml(clip.gt_dir / "rally.yaml", RallySegment(start, end, np.zeros(0, bool), "hit"), spec.fps,
+                         [(int(round(c.t * spec.fps)), c.event) for c in rally.contacts if not c.in_rally],
+                         source="ground_truth")
     counts = {int(v): int(c) for v, c in zip(*np.unique(track.visibility, return_counts=True))}
     return ClipSummary(str(clip.root), seed, rally.n_frames, spec.fps, size, len(events), rally.outcome, counts)
 

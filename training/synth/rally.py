@@ -157,6 +157,37 @@ class InactiveSpec:
 
 
 @dataclass(frozen=True)
+class AroundPointSpec:
+    """What real clips hold around the point (off by default: the default rallies are unchanged).
+
+    Attributes:
+        warmup_bounces: (min, max) bounces of the ball by the server before the serve (thrown down from
+            the hand at ``bounce_height``, caught at the top of the rebound); not events of the point.
+        bounce_height: hand height (m); bounce_speed: downward throw speed (m/s); pause: hand time
+            between bounces (s).
+        after: weights of what the ball does once the point is over: ``none`` (the clip ends ``tail``
+            after), ``roll`` (it goes on bouncing and rolling), ``catch`` (a player catches it), ``side_hit``
+            (a player knocks it to the side, a racket contact that is not an event); after_s: how long
+            the clip runs on (s).
+    """
+
+    warmup_bounces: tuple[int, int] = (0, 0)
+    bounce_height: Range = (0.8, 1.1)
+    bounce_speed: Range = (1.5, 4.0)
+    pause: Range = (0.15, 0.6)
+    after: dict[str, float] = field(default_factory=lambda: {"none": 1.0})
+    after_s: Range = (1.0, 2.5)
+
+    @property
+    def enabled(self) -> bool:
+        return self.warmup_bounces[1] > 0 or set(k for k, w in self.after.items() if w > 0) != {"none"}
+
+
+REAL_AROUND = AroundPointSpec(warmup_bounces=(1, 4),
+                              after={"none": 0.1, "roll": 0.35, "catch": 0.3, "side_hit": 0.25})
+
+
+@dataclass(frozen=True)
 class ReplyScore:
     """Weights of the score that picks who returns a ball, when and how (higher is better): minus
     ``height`` × |ball height - preferred|, minus ``distance`` × the run (m), plus ``forehand`` for a
@@ -191,6 +222,7 @@ class RallyConfig:
         serve: serve set-up; player: bodies and moves.
         lead, tail: clip time before the serve and after the ball is dead (s).
         inactive: stationary balls on the floor.
+        around: the server's bounces before the serve and the ball after the point (off by default).
         attempts: tries per shot to find a launch that fits its ranges and can be returned.
         horizon: longest look-ahead of a flight (s); coarse_dt: its RK4 step (s), which is also the
             spacing of the candidate hit times.
@@ -222,6 +254,7 @@ class RallyConfig:
     lead: Range = (0.3, 1.0)
     tail: Range = (0.3, 1.0)
     inactive: InactiveSpec = InactiveSpec()
+    around: AroundPointSpec = AroundPointSpec()
     volley_reach: float = 1.0
     score: ReplyScore = ReplyScore()
     attempts: int = 8
@@ -694,6 +727,26 @@ class _Planner:
 
     # -- shots ----------------------------------------------------------------------------------------
 
+    def warmup(self, server: _Player) -> list[Flight]:
+        """The server's bounces before the serve, from time 0 (thrown down, caught at the top of the
+        rebound, a pause in the hand in between); their contacts are not events of the point."""
+        sp, rng = self.cfg.around, self.rng
+        n = int(rng.integers(sp.warmup_bounces[0], sp.warmup_bounces[1] + 1))
+        hand = server.motion.start + self.reach_offset(server, "serve", 1.0) * 0.6
+        out, t0 = [], 0.0
+        for _ in range(n):
+            t0 += _uniform(rng, sp.pause)
+            z0 = _uniform(rng, sp.bounce_height)
+            vel = np.array([rng.normal(0, 0.1), rng.normal(0, 0.1), -_uniform(rng, sp.bounce_speed)])
+            f = simulate_flight(self.court, np.append(hand, z0), vel, np.zeros(3), t0, t0 + 2.0, self.dt,
+                                self.model, max_ground=2)
+            after = np.flatnonzero(f.t > f.contacts[0].t) if f.contacts else np.arange(len(f.t))
+            k = int(after[np.argmax(f.vel[after, 2] <= 0)]) if len(after) else len(f.t) - 1
+            f = f.until(float(f.t[k]))
+            out.append(Flight(f.t, f.pos, f.vel, f.spin, [_outside(c) for c in f.contacts], f.end))
+            t0 = float(f.t[-1])
+        return out
+
     def draw_spin(self, spec: ShotSpec, direction: np.ndarray) -> np.ndarray:
         """(3,) spin (rad/s): top/backspin about ẑ × d̂ (ω × v points down for topspin) + sidespin."""
         d = np.append(direction / np.linalg.norm(direction), 0.0)
@@ -959,6 +1012,12 @@ class _Planner:
         server, self.receiver, box = self.place_for_serve()
         pre, t_local = self.pre_serve(server)
         t_serve = _uniform(rng, cfg.lead)
+        if cfg.around.enabled:  # only then: the default rallies draw exactly as before
+            warm = self.warmup(server)
+            if warm:  # the serve's own drop or toss starts a pause after the last catch
+                t_serve = max(t_serve, float(warm[-1].t[-1]) + _uniform(rng, cfg.around.pause) + t_local)
+            for f in warm:
+                self.add_piece(f, last=False)
         shift = t_serve - t_local
         pre = _shifted(pre, shift).until(t_serve + 1e-9)
         self.add_piece(pre, last=False)
@@ -1007,8 +1066,49 @@ class _Planner:
         if not np.isfinite(t_dead):
             t_dead = float(fine.t[-1])
         clip_end = t_dead + tail
-        self.add_piece(fine.until(clip_end), last=True)
         outcome = "winner" if fine_v.kind == "in" else fine_v.kind
+        if self.cfg.around.enabled:
+            return self.after_point(fine, t_serve, t_dead, outcome)
+        self.add_piece(fine.until(clip_end), last=True)
+        return self.assemble(t_serve, t_dead, clip_end, outcome)
+
+    def after_point(self, fine: Flight, t_serve: float, t_dead: float, outcome: str) -> Rally:
+        """The ball once the point is over (``around.after``): its contacts are not events."""
+        sp, rng = self.cfg.around, self.rng
+        kind = _weighted(rng, sp.after)
+        clip_end = t_dead + (_uniform(rng, self.cfg.tail) if kind == "none" else _uniform(rng, sp.after_s))
+        if kind in ("catch", "side_hit"):
+            t_act = t_dead + rng.uniform(0.3, 0.9)
+            if t_act < clip_end:
+                fine = fine.until(t_act)
+                pos = fine.pos[-1].copy()
+                pos[2] = max(pos[2], self.radius)
+                team = "near" if pos[1] < self.zones.net_y else "far"
+                p = min(self.team(team), key=lambda q: np.linalg.norm(q.motion.sample(np.array([t_act]))[0] - pos[:2]))
+                if kind == "side_hit":
+                    side = 1.0 if pos[0] < self.zones.centre_x else -1.0
+                    vel = np.array([side * rng.uniform(3.0, 7.0), rng.normal(0, 1.0), rng.uniform(2.0, 4.0)])
+                    c = Contact(t_act, f"player_{team}", pos.copy(), player=p.pid, in_rally=False)
+                    rest = simulate_flight(self.court, pos, vel, np.zeros(3), t_act, clip_end + 0.05, self.dt,
+                                           self.model)
+                    fine = Flight(np.concatenate([fine.t, rest.t[1:]]), np.concatenate([fine.pos, rest.pos[1:]]),
+                                  np.concatenate([fine.vel, rest.vel[1:]]), np.concatenate([fine.spin, rest.spin[1:]]),
+                                  fine.contacts + [c] + rest.contacts, rest.end)
+                else:  # caught: the ball stays in the hand at waist height
+                    hand = np.append(p.motion.sample(np.array([t_act]))[0], 1.0)
+                    tt = np.array([t_act + 0.15, clip_end + 0.05])
+                    fine = Flight(np.concatenate([fine.t, tt]), np.concatenate([fine.pos, [hand, hand]]),
+                                  np.concatenate([fine.vel, np.zeros((2, 3))]),
+                                  np.concatenate([fine.spin, np.zeros((2, 3))]), fine.contacts, "time")
+        elif kind == "roll" and fine.t[-1] < clip_end:
+            rest = simulate_flight(self.court, fine.pos[-1], fine.vel[-1], fine.spin[-1], float(fine.t[-1]),
+                                   clip_end + 0.05, self.dt, self.model)
+            fine = Flight(np.concatenate([fine.t, rest.t[1:]]), np.concatenate([fine.pos, rest.pos[1:]]),
+                          np.concatenate([fine.vel, rest.vel[1:]]), np.concatenate([fine.spin, rest.spin[1:]]),
+                          fine.contacts + rest.contacts, rest.end)
+        fine = fine.until(clip_end)
+        contacts = [c if c.t <= t_dead + 1e-6 else _outside(c) for c in fine.contacts]
+        self.add_piece(Flight(fine.t, fine.pos, fine.vel, fine.spin, contacts, fine.end), last=True)
         return self.assemble(t_serve, t_dead, clip_end, outcome)
 
     # -- output ---------------------------------------------------------------------------------------
@@ -1030,6 +1130,7 @@ class _Planner:
         return Rally(
             sport=self.cfg.sport, fps=self.fps, n_frames=n_frames, ball=ball, contacts=contacts,
             players=plans, inactive_balls=self.inactive_balls(plans, ball, n_frames), outcome=outcome,
+            t_serve=t_serve, t_dead=t_dead,
         )
 
     def ball_path(self, t_serve: float, t_dead: float, t_last: float) -> BallPath:
@@ -1100,9 +1201,14 @@ class _Planner:
         return out
 
 
+def _outside(c: Contact) -> Contact:
+    """The same contact marked as outside the point."""
+    return Contact(c.t, c.event, c.position, c.plane, c.player, in_rally=False)
+
+
 def _shifted(flight: Flight, dt: float) -> Flight:
     """The same flight ``dt`` seconds later."""
-    contacts = [Contact(c.t + dt, c.event, c.position, c.plane, c.player) for c in flight.contacts]
+    contacts = [Contact(c.t + dt, c.event, c.position, c.plane, c.player, c.in_rally) for c in flight.contacts]
     return Flight(flight.t + dt, flight.pos, flight.vel, flight.spin, contacts, flight.end)
 
 

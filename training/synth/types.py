@@ -23,6 +23,8 @@ class Contact:
         position: (3,) ball centre at the contact.
         plane: name of the court plane touched (None for a racket hit).
         player: index into :attr:`Rally.players` for a racket hit (None otherwise).
+        in_rally: False for a contact outside the point (the server's bounces before the serve, the ball
+            after the point is over): not an event of events.csv.
     """
 
     t: float
@@ -30,6 +32,7 @@ class Contact:
     position: np.ndarray
     plane: str | None = None
     player: int | None = None
+    in_rally: bool = True
 
 
 @dataclass
@@ -111,6 +114,7 @@ class Rally:
         ball: the ball in play; contacts: every contact in time order (racket hits included).
         players: the players' plans; inactive_balls: stationary balls on court.
         outcome: how the rally ended (``winner``, ``error_net``, ``error_out``, ...).
+        t_serve, t_dead: the serve's racket contact and the moment the ball is dead (s).
     """
 
     sport: str
@@ -121,11 +125,20 @@ class Rally:
     players: list[PlayerPlan]
     inactive_balls: list[InactiveBall] = field(default_factory=list)
     outcome: str = ""
+    t_serve: float | None = None
+    t_dead: float | None = None
 
     @property
     def frame_times(self) -> np.ndarray:
         return np.arange(self.n_frames) / self.fps
 
     def event_frames(self) -> list[tuple[int, str]]:
-        """(frame, label) of every contact: the frame nearest to the contact time."""
-        return [(int(round(c.t * self.fps)), c.event) for c in self.contacts]
+        """(frame, label) of every contact of the point: the frame nearest to the contact time."""
+        return [(int(round(c.t * self.fps)), c.event) for c in self.contacts if c.in_rally]
+
+    def rally_frames(self) -> tuple[int, int] | None:
+        """(serve frame, dead-ball frame) of the point, clipped to the clip; None when unknown."""
+        if self.t_serve is None or self.t_dead is None:
+            return None
+        last = self.n_frames - 1
+        return (min(int(round(self.t_serve * self.fps)), last), min(int(round(self.t_dead * self.fps)), last))

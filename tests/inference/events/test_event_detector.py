@@ -98,3 +98,12 @@ def test_cli_writes_events_csv(clips, tmp_path):
     assert main(["events", str(clip.root)]) == 0
     events = read_events_csv(clip.events_path)
     assert len(events) > 0 and events.frame.max() < c.n_frames
+    from inference.events.rally import read_rally_yaml
+
+    start, end = read_rally_yaml(clip.root / "rally.yaml")  # the point, beside events.csv
+    assert 0 <= start <= end < c.n_frames
+    import yaml
+
+    outside = yaml.safe_load((clip.root / "rally.yaml").read_text())["outside"]
+    assert main(["events", str(clip.root), "--rally-only"]) == 0
+    assert len(read_events_csv(clip.events_path)) == len(events) - len(outside)

@@ -36,6 +36,10 @@ def test_infer_writes_every_file_and_scores_3d(generated_clip, tmp_path, capsys)
     assert (ball.visibility > 0).sum() > 0.4 * clip.n_frames
     events = clip.read_events()
     assert len(events) >= 2
+    from inference.events.rally import read_rally_yaml
+
+    start, end = read_rally_yaml(out / "rally.yaml")  # the point's start and end beside events.csv
+    assert 0 <= start <= end < clip.n_frames
     b3 = clip.read_ball_3d()
     assert len(b3) > 0 and np.isfinite(b3.xyz).all()  # at least one flight fitted from detected inputs
     # per-stage timing table and scores against the generated ground truth

@@ -6,11 +6,8 @@ import os
 from pathlib import Path
 
 import pytest
+from conftest import compose_cfg
 import torch
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
-from hydra.core.hydra_config import HydraConfig
-from omegaconf import open_dict
 
 from training.run import evaluate, train
 from training.synth.generate import SynthConfig, generate_dataset
@@ -28,19 +25,6 @@ def tiny(tmp_path_factory):
             sport=sport, randomise_camera=False, width=320, height=192, fps=30.0, codec="mp4v",
             randomise_look=False, max_frames=40))
     return root
-
-
-def compose_cfg(overrides: list[str], tmp_path: Path, name: str = "train"):
-    GlobalHydra.instance().clear()
-    os.environ.setdefault("PROJECT_ROOT", str(ROOT))
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name=name, return_hydra_config=True, overrides=overrides)
-    with open_dict(cfg):
-        cfg.paths.output_dir = str(tmp_path)
-        cfg.paths.log_dir = str(tmp_path)
-        cfg.hydra.runtime.output_dir = str(tmp_path)
-    HydraConfig().set_config(cfg)
-    return cfg
 
 
 def small(tiny: Path, sport: str) -> list[str]:

@@ -105,3 +105,29 @@ def test_data_module_draws_new_degradations_each_epoch(tmp_path):
     sims, tracks = dm.tuning_clips()
     assert len(sims) == len(tracks) == 2 * clean  # clean + one degraded copy
     assert (tracks[clean].visibility > 0).sum() < (tracks[0].visibility > 0).sum()
+
+
+def test_real_tracker_options_integer_pixels_far_end_and_cropped_top(clips):
+    """integer_px rounds to whole pixels, far_miss loses the ball high in the image more than low,
+    top_crop removes every detection in the cropped band; all off by default (draws unchanged)."""
+    base = dict(p_clean=0.0, p_smooth=0.0, miss_frac=0.0, outlier_frac=0.0, p_occlude_near=0.0,
+                p_occlude_far=0.0, p_gap_event=0.0)
+    c = clips[0]
+    a = degrade(c, np.random.default_rng(1), DegradeConfig(**base)).track
+    b = degrade(c, np.random.default_rng(1), DegradeConfig(**base, integer_px=True)).track
+    ok = b.visibility > 0
+    px = b.xy[ok] * np.array([c.width, c.height])
+    assert np.allclose(px, np.round(px), atol=1e-6) and np.abs(a.xy[ok] - b.xy[ok]).max() > 0
+    far, near_lost = [], []
+    for k, cl in enumerate(clips):
+        t = degrade(cl, np.random.default_rng(k), DegradeConfig(**base, far_miss=0.6)).track
+        vis = (cl.ball.visibility > 0) & np.isfinite(cl.ball.xy).all(axis=1)
+        hi = vis & (cl.ball.xy[:, 1] < 0.45)
+        lo = vis & (cl.ball.xy[:, 1] >= 0.45)
+        far.append((t.visibility[hi] == 0).mean() if hi.any() else np.nan)
+        near_lost.append((t.visibility[lo] == 0).mean() if lo.any() else np.nan)
+    assert np.nanmean(far) > 0.4 and np.nanmean(near_lost) < 0.05
+    t = degrade(c, np.random.default_rng(2), DegradeConfig(**base, top_crop=0.3)).track
+    assert not ((t.visibility > 0) & (c.ball.xy[:, 1] < 0.3)).any()
+    with pytest.raises(ValueError, match="far_miss"):
+        DegradeConfig(far_miss=1.5)

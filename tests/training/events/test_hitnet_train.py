@@ -2,16 +2,12 @@
 tennis trains from a dataset converted from a TrackNet ``Label.csv``; bad data gives clear errors."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import compose_cfg
 import torch
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
-from hydra.core.hydra_config import HydraConfig
-from omegaconf import open_dict
 
 from inference.clipio import Clip, ClipInfo, HitEvents, Manifest, ManifestEntry
 from inference.events import ClassSet, EventDetector, UnmappedLabelError
@@ -24,19 +20,6 @@ from training.run import evaluate, train
 ROOT = Path(__file__).resolve().parents[3]
 HITNET_EXPERIMENTS = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("hitnet*.yaml"))
 TINY = ["data.n_train=3", "data.n_val=2", "data.n_test=2", "data.batch_size=32", "trainer.accelerator=cpu"]
-
-
-def compose_cfg(overrides: list[str], tmp_path: Path, name: str = "train"):
-    GlobalHydra.instance().clear()
-    os.environ.setdefault("PROJECT_ROOT", str(ROOT))
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        cfg = compose(config_name=name, return_hydra_config=True, overrides=overrides)
-    with open_dict(cfg):
-        cfg.paths.output_dir = str(tmp_path)
-        cfg.paths.log_dir = str(tmp_path)
-        cfg.hydra.runtime.output_dir = str(tmp_path)
-    HydraConfig().set_config(cfg)
-    return cfg
 
 
 @pytest.mark.parametrize("experiment", HITNET_EXPERIMENTS)

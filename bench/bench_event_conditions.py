@@ -1,0 +1,62 @@
+"""Per-class event F1 of hit-event models under input conditions (the tables of docs/events.md).
+
+    .venv/bin/python bench/bench_event_conditions.py [--sport tennis] [--clips 60] [--fps 50]
+        [--weights shipped runs/other.pth.tar ...]
+
+Held-out simulated rallies (their own seed) with the annotated ball, pipeline-like tracks
+(``training.events.degrade`` on every clip) and real-tracker-like tracks with gaps at the contacts (whole
+pixels, the far end lost more often, the top 5 % cropped, 90 % of the near and far hits hidden); every
+event kept, ±2 frames at 50 fps (scaled). Prints one Markdown table per condition and the CPU time.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+
+CONDITIONS = {
+    "annotated": None,
+    "pipeline-like": dict(p_clean=0.0),
+    "real-tracker-like, gaps at contacts": dict(p_clean=0.0, integer_px=True, far_miss=0.3, top_crop=0.05,
+                                                p_occlude_near=0.9, p_occlude_far=0.9),
+}
+
+
+def main(argv=None) -> None:
+    from inference.events import EventDetector
+    from inference.events.metrics import EventCounts, tolerance_frames
+    from training.events.degrade import DegradeConfig, degrade_all
+    from training.events.simulate import simulate_clips
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sport", default="tennis")
+    ap.add_argument("--clips", type=int, default=60)
+    ap.add_argument("--fps", type=float, default=50.0)
+    ap.add_argument("--weights", nargs="+", default=["shipped"])
+    ap.add_argument("--cache", default="runs/events_cache")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    t0 = time.process_time()
+    clips = simulate_clips(args.sport, args.clips, 6161, args.cache, progress=False, fps=args.fps)
+    models = [(w, EventDetector.from_checkpoint(None if w == "shipped" else w, sport=args.sport)) for w in args.weights]
+    cs = models[0][1].class_set
+    print(f"\n{args.sport}, {len(clips)} held-out simulated rallies at {args.fps:g} fps, every event kept, "
+          f"±{tolerance_frames(args.fps)} frames\n")
+    for cond, kw in CONDITIONS.items():
+        tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig(**kw))
+        print(f"**{cond}**\n\n| model | all | " + " | ".join(cs.classes[1:]) + " |\n|---|" + "---|" * cs.n)
+        for name, det in models:
+            counts = EventCounts(cs.classes)
+            for c, tr in zip(clips, tracks):
+                r = det.predict(tr, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True)
+                counts.add(c.events.frame, [cs.encode_label(str(e)) or 0 for e in c.events.event], r.events.frame,
+                           [cs.index(x) for x in r.coarse], tolerance_frames(c.fps))
+            f1 = [counts.scores()["f1"]] + [counts.scores(i)["f1"] for i in range(1, cs.n)]
+            print(f"| {name} | " + " | ".join(f"{v:.3f}" for v in f1) + " |", flush=True)
+        print()
+    print(f"CPU time {time.process_time() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
