@@ -53,8 +53,10 @@ RANK_SCRIPT = textwrap.dedent('''
     fake = Fake()
     outputs = [(torch.as_tensor(z["ev_pred"][shard]), torch.as_tensor(z["ev_y"][shard]))] if rank == 0 or len(z["ev_y"]) > 1 else []
     log_event_metrics(fake, "val", outputs, 4)
-    print("RESULT " + json.dumps({"report": report, "events": fake.logged}))
-    torch.distributed.destroy_process_group()
+    print("RESULT " + json.dumps({"report": report, "events": fake.logged}), flush=True)
+    torch.distributed.barrier()                   # both ranks are done with the group
+    import os
+    os._exit(0)  # no gloo teardown: a rank closing its sockets while the other tears down can abort (SIGABRT)
 ''')
 
 
