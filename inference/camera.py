@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg
 import yaml
 
 from inference.clipio.atomic import atomic_write_text
@@ -34,6 +33,8 @@ def decompose_projection(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     M = P[:, :3]
     if not np.all(np.isfinite(M)) or abs(np.linalg.det(M)) <= 1e-12 * np.linalg.norm(M) ** 3:
         raise ValueError("degenerate projection matrix: its left 3×3 block is singular")
+    import scipy.linalg  # here, not at the top: `rally3d --help` must not load scipy
+
     K, R = scipy.linalg.rq(M)
     S = np.diag(np.sign(np.diag(K)))
     K, R = K @ S, S @ R

@@ -11,8 +11,6 @@ import argparse
 import sys
 from importlib.metadata import entry_points
 
-from inference.clipio.errors import FormatError
-
 GROUP = "rally3d.commands"
 
 
@@ -39,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0 if args.command is None else 2
+    from inference.clipio.errors import FormatError  # after parsing: `--help` stays free of NumPy and OpenCV
+
     try:
         return int(args.func(args) or 0)
     except (FormatError, FileNotFoundError, KeyError, ValueError, RuntimeError) as e:

@@ -4,46 +4,59 @@ Every reader validates its input and raises :class:`FormatError` naming the file
 fix; every writer is atomic and deterministic.
 """
 
-from .atomic import atomic_write_bytes, atomic_write_text, private_temp_path
-from .clip import Clip
-from .clip_yaml import ClipInfo, read_clip_yaml, write_clip_yaml
-from .csvfiles import (
-    read_ball_3d_csv,
-    read_ball_csv,
-    read_court_points_csv,
-    read_events_csv,
-    read_inactive_balls_csv,
-    write_ball_3d_csv,
-    write_ball_csv,
-    write_court_points_csv,
-    write_events_csv,
-    write_inactive_balls_csv,
-)
-from .errors import FormatError
-from .frames import FolderFrames, FrameSource, VideoFrames, write_frames_folder, write_video
-from .manifest import SPLITS, Manifest, ManifestEntry, split_of
-from .players import PlayerTracks, read_players_csv, write_players_csv
-from .importers import (
-    PADEL_6CLASS_CODES,
-    export_tracknet_label,
-    hit_by_image_half,
-    import_thesis_ball,
-    import_thesis_court_3d,
-    import_thesis_court_points,
-    import_thesis_hits,
-    import_tracknet_badminton,
-    import_tracknet_label,
-)
-from .tables import (
-    BALL3D_KINDS,
-    EVENT_LABELS,
-    Ball3D,
-    BallTrack,
-    CourtPoints,
-    DenseBallTrack,
-    HitEvents,
-    InactiveBalls,
-)
+from inference.lazy import lazy_exports
+
+# name → submodule, imported on first use (keeps `rally3d --help` free of NumPy and OpenCV)
+_EXPORTS = {
+    "atomic_write_bytes": ".atomic",
+    "atomic_write_text": ".atomic",
+    "private_temp_path": ".atomic",
+    "Clip": ".clip",
+    "ClipInfo": ".clip_yaml",
+    "read_clip_yaml": ".clip_yaml",
+    "write_clip_yaml": ".clip_yaml",
+    "read_ball_3d_csv": ".csvfiles",
+    "read_ball_csv": ".csvfiles",
+    "read_court_points_csv": ".csvfiles",
+    "read_events_csv": ".csvfiles",
+    "read_inactive_balls_csv": ".csvfiles",
+    "write_ball_3d_csv": ".csvfiles",
+    "write_ball_csv": ".csvfiles",
+    "write_court_points_csv": ".csvfiles",
+    "write_events_csv": ".csvfiles",
+    "write_inactive_balls_csv": ".csvfiles",
+    "FormatError": ".errors",
+    "FolderFrames": ".frames",
+    "FrameSource": ".frames",
+    "VideoFrames": ".frames",
+    "write_frames_folder": ".frames",
+    "write_video": ".frames",
+    "SPLITS": ".manifest",
+    "Manifest": ".manifest",
+    "ManifestEntry": ".manifest",
+    "split_of": ".manifest",
+    "PlayerTracks": ".players",
+    "read_players_csv": ".players",
+    "write_players_csv": ".players",
+    "PADEL_6CLASS_CODES": ".importers",
+    "export_tracknet_label": ".importers",
+    "hit_by_image_half": ".importers",
+    "import_thesis_ball": ".importers",
+    "import_thesis_court_3d": ".importers",
+    "import_thesis_court_points": ".importers",
+    "import_thesis_hits": ".importers",
+    "import_tracknet_badminton": ".importers",
+    "import_tracknet_label": ".importers",
+    "BALL3D_KINDS": ".tables",
+    "EVENT_LABELS": ".tables",
+    "Ball3D": ".tables",
+    "BallTrack": ".tables",
+    "CourtPoints": ".tables",
+    "DenseBallTrack": ".tables",
+    "HitEvents": ".tables",
+    "InactiveBalls": ".tables",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
     "BALL3D_KINDS",

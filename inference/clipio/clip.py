@@ -11,11 +11,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from . import csvfiles
 from .clip_yaml import ClipInfo, read_clip_yaml, write_clip_yaml
 from .errors import FormatError
-from .frames import FrameSource
 from .players import PlayerTracks, read_players_csv, write_players_csv
 from .tables import Ball3D, BallTrack, CourtPoints, HitEvents, InactiveBalls
 
 if TYPE_CHECKING:
+    from .frames import FrameSource
     from inference.camera import Camera
 
 T = TypeVar("T")
@@ -124,6 +124,8 @@ class Clip:
 
     def frames(self, *, cache_size: int = 8) -> FrameSource:
         """The clip's frames (lazy; close it or use ``with``)."""
+        from .frames import FrameSource  # here: OpenCV loads only when frames are read
+
         return FrameSource.open(self.video_path, fps=self.info.fps, cache_size=cache_size)
 
     @cached_property

@@ -1,13 +1,28 @@
 """Hit events (play segmentation): features, the HitNet network, the decoder, a physics-aware
 detector and the runtime :class:`EventDetector` used by ``rally3d events`` and ``rally3d infer``."""
 
-from .classes import ClassSet, DecodeRules, UnmappedLabelError
+from inference.lazy import lazy_exports
+
+# light, and named like their submodule (an import of the submodule would rebind a lazy name to it)
 from .decode import DecodeParams, decode
-from .detector import EventDetector, EventResult, default_weights, load_model_file
-from .features import FeatureConfig
-from .metrics import EventCounts, format_event_table, tolerance_frames
-from .network import HitNet
-from .physics import PhysicsParams
+
+# name → submodule, imported on first use (keeps `rally3d --help` free of torch/scipy)
+_EXPORTS = {
+    "ClassSet": ".classes",
+    "DecodeRules": ".classes",
+    "UnmappedLabelError": ".classes",
+    "EventDetector": ".detector",
+    "EventResult": ".detector",
+    "default_weights": ".detector",
+    "load_model_file": ".detector",
+    "FeatureConfig": ".features",
+    "EventCounts": ".metrics",
+    "format_event_table": ".metrics",
+    "tolerance_frames": ".metrics",
+    "HitNet": ".network",
+    "PhysicsParams": ".physics",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
     "ClassSet",

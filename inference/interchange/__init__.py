@@ -6,9 +6,19 @@ video JSON (:mod:`.labelstudio`). The mapping is documented in docs/interchange.
 :mod:`inference.clipio` is used from the project.
 """
 
-from .common import Imported, LabelMap, write_into_clip
-from .cvat import export_cvat, import_cvat
-from .labelstudio import export_labelstudio, import_labelstudio
+from inference.lazy import lazy_exports
+
+# name → submodule, imported on first use (keeps `rally3d --help` free of torch/scipy)
+_EXPORTS = {
+    "Imported": ".common",
+    "LabelMap": ".common",
+    "write_into_clip": ".common",
+    "export_cvat": ".cvat",
+    "import_cvat": ".cvat",
+    "export_labelstudio": ".labelstudio",
+    "import_labelstudio": ".labelstudio",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
     "Imported",

@@ -3,10 +3,20 @@
 Stages (:mod:`.stages`) run in order, resumably (:mod:`.state`), with a per-stage timing summary
 (:mod:`.run`); many clips go through Lightning's predict loop (:mod:`.engine`).
 """
+from inference.lazy import lazy_exports
+
+# light, and named like their submodule (an import of the submodule would rebind a lazy name to it)
 from .prepare import Prepared, prepare
-from .run import PipelineReport, StageReport, run_pipeline
 from .score import Scores, score
-from .stages import PipelineConfig
+
+# name → submodule, imported on first use (keeps `rally3d --help` free of torch/scipy)
+_EXPORTS = {
+    "PipelineReport": ".run",
+    "StageReport": ".run",
+    "run_pipeline": ".run",
+    "PipelineConfig": ".stages",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = ["PipelineConfig", "PipelineReport", "Prepared", "Scores", "StageReport", "prepare", "run_pipeline",
            "score"]

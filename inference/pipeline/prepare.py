@@ -24,7 +24,6 @@ from pathlib import Path
 
 from inference.camera import Camera
 from inference.clipio import Clip, ClipInfo, FormatError
-from inference.clipio.frames import VIDEO_FIX, FrameSource
 
 VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"}
 
@@ -52,6 +51,8 @@ def probe_video(path: Path) -> tuple[int, int, float, int]:
     """(width, height, fps, n_frames) of a video file; a clear :class:`FormatError` if it cannot be read."""
     if not path.is_file():
         raise FormatError(path, "video file not found", fix="check the path")
+    from inference.clipio.frames import VIDEO_FIX, FrameSource  # here: `rally3d infer --help` needs no OpenCV
+
     with FrameSource.open(path, cache_size=0) as src:  # decodes frame 0: a corrupt file fails here
         if not src.fps or src.fps <= 0:
             raise FormatError(path, "the video does not state its frame rate", fix=VIDEO_FIX)
@@ -150,6 +151,8 @@ def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path
         if clip_yaml.is_file() and "cut" not in Clip(out).info.extra:
             raise FileExistsError(f"{clip_yaml} belongs to another clip; choose another --out")
         out.mkdir(parents=True, exist_ok=True)
+        from inference.clipio.frames import FrameSource
+
         with FrameSource.open(video, cache_size=0) as src:
             written = write_video(out / "video.mp4", src.iter(first, stop), fps, fourcc="h264", crf=18)
         info = ClipInfo(sport=Path(court).stem if court.endswith(".yaml") else court, fps=fps, width=width,

@@ -7,7 +7,6 @@ import numpy as np
 
 from inference.court import Court
 
-from .joint import fit_joint
 from .observations import Observations
 from .plausibility import net_clearance, summary
 from .results import RallyFit, SegmentFit
@@ -20,6 +19,7 @@ DEFAULT_METHOD = "joint"
 def methods() -> dict[str, Callable[[Observations], RallyFit]]:
     """Method name → ``fn(obs) -> RallyFit``."""
     from .baselines import fit_rally
+    from .joint import fit_joint  # here: the CLI reads METHOD_NAMES without loading scipy
 
     out: dict[str, Callable[[Observations], RallyFit]] = {
         name: (lambda obs, _n=name: fit_rally(obs, _n)) for name in METHOD_NAMES if name != "joint"}

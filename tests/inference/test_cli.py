@@ -1,6 +1,7 @@
 """The rally3d command: discovery of subcommands, --help on each, calibrate/check/courts on real clips."""
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -185,3 +186,38 @@ def test_reconstruct_refuses_a_camera_of_another_frame_size(sample, capsys):
     err = capsys.readouterr().err
     assert "camera.yaml" in err and "1920×1080" in err and "1280×720" in err
     assert not (sample / "ball_3d.csv").exists()
+
+
+HEAVY = ("torch", "lightning", "pytorch_lightning", "cv2", "viser", "scipy")
+_LOADED_AFTER_HELP = """
+import sys
+from inference.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit:
+    pass
+print(" ".join(sorted(m for m in sys.modules if m.split(".")[0] in {heavy!r})))
+"""
+
+
+def _heavy_modules_after(argv: list[str]) -> set[str]:
+    """Top-level heavy packages in ``sys.modules`` after ``rally3d *argv`` ran in a fresh interpreter."""
+    repo = str(Path(__file__).resolve().parents[2])
+    code = _LOADED_AFTER_HELP.format(heavy=set(HEAVY))
+    res = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=repo,
+                         env={**os.environ, "PYTHONPATH": repo}, check=True)
+    assert "usage: rally3d" in res.stdout, res.stdout + res.stderr
+    return {line.split(".")[0] for line in res.stdout.splitlines()[-1].split()}
+
+
+def test_help_loads_no_heavy_library():
+    """`rally3d --help` and every command's --help parse without torch, Lightning, OpenCV, viser or SciPy."""
+    from importlib.metadata import entry_points
+
+    from inference.cli import GROUP
+
+    names = sorted(ep.name for ep in entry_points(group=GROUP))
+    assert {"reconstruct", "detect", "label", "infer"} <= set(names)
+    assert _heavy_modules_after(["--help"]) == set()
+    for name in names:
+        assert _heavy_modules_after([name, "--help"]) == set(), f"rally3d {name} --help"
