@@ -3,7 +3,9 @@ flight that fails them, and the clip-level plausibility summary written to segme
 
 A flight is *plausible* when its reprojection RMS is at most ``rms_fail_factor`` × the 2D noise, no frame
 of it lies more than 5 cm below the floor or behind a glass/mesh patch (padel's enclosure; the open sides
-and the space above the walls are allowed) and it does not pass through the net without a net event.
+and the space above the walls are allowed), it does not pass through the net without a net event and, between
+two contacts, its speed at the first is at most ``max_speed_ms`` (a short flight between two badly placed contacts can fit
+the track with a ball launched at thousands of km/h).
 
 Example:
     >>> fit = reconstruct(obs)
@@ -105,6 +107,9 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
         clearance = net_clearance(court, xyz[m])
         if "net" not in labels and clearance < -PENETRATION_LIMIT_M:
             reasons.append(f"passes through the net ({clearance:.2f} m below its top)")
+        speed = float(np.linalg.norm(sol.theta[f.vel]))
+        if f.end is not None and speed > cfg.max_speed_ms:     # a free end's speed is pinned by its track alone
+            reasons.append(f"launched at {3.6 * speed:.0f} km/h (> {3.6 * cfg.max_speed_ms:.0f} km/h)")
         out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e),
                                float(depth[m].max())))
     return out
