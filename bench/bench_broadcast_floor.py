@@ -10,7 +10,7 @@ never the ground truth. Figures per clip: the calibration's camera-centre error 
 the clicks (px); flights reconstructed / failed (and why); frames of reconstructed flights inside the enclosure
 (padel: not below the floor nor behind a glass or mesh patch; tennis: above the floor); contacts of
 reconstructed flights below the floor (count, lowest z of any contact or frame); reconstructed flights whose
-reprojection RMS exceeds 4 × the 2D noise; the 3D error against the clip's ground truth (MAE / MedAE over the
+reprojection RMS exceeds 4 × the 2D noise; the frames with a 3D position; the 3D error against the clip's ground truth (MAE / MedAE over the
 frames both have) and the pipeline's CPU time. The physical figures come from the written ball_3d.csv and
 segments.json, recomputed here rather than trusted from the pipeline's own summary.
 """
@@ -119,8 +119,8 @@ def main() -> None:
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench_broadcast_floor_"))
     work.mkdir(parents=True, exist_ok=True)
     print("| sport | seed | centre err m | focal err % | calib RMS px | 2D F1 | events F1 | flights ok/all | "
-          "inside % | contacts below floor | lowest z m | ok flights RMS > 4σ | 3D MAE / MedAE m | CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "inside % | contacts below floor | lowest z m | ok flights RMS > 4σ | 3D frames | 3D MAE / MedAE m | CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     try:
         for sport in args.sports:
@@ -129,7 +129,7 @@ def main() -> None:
                 rows.append(r)
                 print(f"| {sport} | {r['seed']} | {r['centre']:.3f} | {r['focal']:.2f} | {r['rms']:.2f} | "
                       f"{r['ball_f1']:.3f} | {r['ev_f1']:.3f} | {r['ok']}/{r['flights']} | {100 * r['inside']:.1f} | "
-                      f"{r['below']} | {r['zmin']:.2f} | {r['over']} | {r['mae']:.2f} / {r['medae']:.2f} | "
+                      f"{r['below']} | {r['zmin']:.2f} | {r['over']} | {r['frames']} | {r['mae']:.2f} / {r['medae']:.2f} | "
                       f"{r['cpu']:.0f} |", flush=True)
     finally:
         if args.keep is None:
