@@ -103,7 +103,7 @@ def one_clip(sport: str, seed: int, frames: int, work: Path) -> dict:
     cam, gt = Camera.load(res.camera_path), Camera.load(clip.root / "gt" / "camera.yaml")
     sc = score(res, clip)
     return {"sport": sport, "seed": seed, "centre": float(np.linalg.norm(cam.centre - gt.centre)),
-            "focal": 100 * abs(cam.K[0, 0] / gt.K[0, 0] - 1), "rms": float(cam.meta.get("rms_px", float("nan"))),
+            "focal": 100 * abs(cam.K[0, 0] / gt.K[0, 0] - 1), "rms": float(cam.rms_px if cam.rms_px is not None else float("nan")),
             "mae": sc.mae_m, "medae": sc.medae_m, "ev_f1": sc.events_f1, "ball_f1": sc.ball_f1, "cpu": cpu,
             **physics(res, sport)}
 

@@ -100,9 +100,16 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
             reasons.append(f"reprojection RMS {rms:.1f} px > {cfg.rms_fail_factor:g} × the 2D noise "
                            f"({cfg.pixel_sigma:g} px)")
         k = int(np.argmax(np.where(m, depth, -1.0)))
-        if depth[k] > PENETRATION_LIMIT_M:
-            reasons.append(f"passes {depth[k]:.2f} m {'below the floor' if where[k] == 'floor' else 'behind the ' + where[k]}"
-                           f" at frame {frames[k]}")
+        deepest = (float(depth[k]), where[k], f"frame {frames[k]}")
+        # its contacts too: a contact on an unbounded plane (the net's, a wall's) can sit below the floor
+        ends = [c for c in (f.start, f.end) if c is not None]
+        c_depth, c_where = penetration(court, np.array([ch.point(sol.theta, c) for c in ends]))
+        for c, d, w in zip(ends, c_depth, c_where):
+            if d > deepest[0]:
+                deepest = (float(d), w, f"its {ch.contacts[c].label} contact (frame {ch.contacts[c].frame})")
+        if deepest[0] > PENETRATION_LIMIT_M:
+            d, w, at = deepest
+            reasons.append(f"passes {d:.2f} m {'below the floor' if w == 'floor' else 'behind the ' + w} at {at}")
         labels = [ch.contacts[f.start].label] + ([ch.contacts[f.end].label] if f.end is not None else [])
         clearance = net_clearance(court, xyz[m])
         if "net" not in labels and clearance < -PENETRATION_LIMIT_M:
@@ -110,8 +117,7 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
         speed = float(np.linalg.norm(sol.theta[f.vel]))
         if f.end is not None and speed > cfg.max_speed_ms:     # a free end's speed is pinned by its track alone
             reasons.append(f"launched at {3.6 * speed:.0f} km/h (> {3.6 * cfg.max_speed_ms:.0f} km/h)")
-        out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e),
-                               float(depth[m].max())))
+        out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e), deepest[0]))
     return out
 
 
