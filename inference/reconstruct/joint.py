@@ -50,6 +50,7 @@ class JointConfig(ShootingConfig):
     sigma_inflation: float = 1.0      # covariance scale for what the model leaves out (bench/bench_joint.py)
     sigma_floor_m: float = 0.003      # isotropic m added to every frame's σ
     max_sigma_m: float = 3.0          # a flight whose median σ exceeds this is reported failed
+    max_speed_ms: float = 75.0        # a flight launched faster (270 km/h; records are ~263) is implausible
 
 
 # ---------------------------------------------------------------------------------------------------

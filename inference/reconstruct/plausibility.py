@@ -3,7 +3,9 @@ flight that fails them, and the clip-level plausibility summary written to segme
 
 A flight is *plausible* when its reprojection RMS is at most ``rms_fail_factor`` × the 2D noise, no frame
 of it lies more than 5 cm below the floor or behind a glass/mesh patch (padel's enclosure; the open sides
-and the space above the walls are allowed) and it does not pass through the net without a net event.
+and the space above the walls are allowed), it does not pass through the net without a net event and, between
+two contacts, its speed at the first is at most ``max_speed_ms`` (a short flight between two badly placed contacts can fit
+the track with a ball launched at thousands of km/h).
 
 Example:
     >>> fit = reconstruct(obs)
@@ -98,15 +100,24 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
             reasons.append(f"reprojection RMS {rms:.1f} px > {cfg.rms_fail_factor:g} × the 2D noise "
                            f"({cfg.pixel_sigma:g} px)")
         k = int(np.argmax(np.where(m, depth, -1.0)))
-        if depth[k] > PENETRATION_LIMIT_M:
-            reasons.append(f"passes {depth[k]:.2f} m {'below the floor' if where[k] == 'floor' else 'behind the ' + where[k]}"
-                           f" at frame {frames[k]}")
+        deepest = (float(depth[k]), where[k], f"frame {frames[k]}")
+        # its contacts too: a contact on an unbounded plane (the net's, a wall's) can sit below the floor
+        ends = [c for c in (f.start, f.end) if c is not None]
+        c_depth, c_where = penetration(court, np.array([ch.point(sol.theta, c) for c in ends]))
+        for c, d, w in zip(ends, c_depth, c_where):
+            if d > deepest[0]:
+                deepest = (float(d), w, f"its {ch.contacts[c].label} contact (frame {ch.contacts[c].frame})")
+        if deepest[0] > PENETRATION_LIMIT_M:
+            d, w, at = deepest
+            reasons.append(f"passes {d:.2f} m {'below the floor' if w == 'floor' else 'behind the ' + w} at {at}")
         labels = [ch.contacts[f.start].label] + ([ch.contacts[f.end].label] if f.end is not None else [])
         clearance = net_clearance(court, xyz[m])
         if "net" not in labels and clearance < -PENETRATION_LIMIT_M:
             reasons.append(f"passes through the net ({clearance:.2f} m below its top)")
-        out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e),
-                               float(depth[m].max())))
+        speed = float(np.linalg.norm(sol.theta[f.vel]))
+        if f.end is not None and speed > cfg.max_speed_ms:     # a free end's speed is pinned by its track alone
+            reasons.append(f"launched at {3.6 * speed:.0f} km/h (> {3.6 * cfg.max_speed_ms:.0f} km/h)")
+        out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e), deepest[0]))
     return out
 
 

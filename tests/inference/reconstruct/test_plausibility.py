@@ -13,8 +13,11 @@ import pytest
 from inference.clipio import Clip
 from inference.reconstruct import Observations, reconstruct
 from inference.reconstruct.evaluate import Setting, prepare
-from inference.reconstruct.joint import fit_joint
-from inference.reconstruct.plausibility import penetration
+from inference.reconstruct.joint import JointConfig, Plan, PlanContact, _fit_with_ends, fit_joint
+from inference.reconstruct.observations import contact_priors
+from inference.reconstruct.plausibility import check_flights, penetration
+from inference.physics import FlightModel
+from inference.reconstruct.shooting import HitPrior
 
 SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
 
@@ -104,3 +107,45 @@ def test_penetration_and_net_clearance():
     low = np.column_stack([np.full(10, 5.0), np.linspace(7.0, 13.0, 10), np.full(10, 0.4)])
     high = low + [0.0, 0.0, 1.0]
     assert net_clearance(court, low) < -0.4 and net_clearance(court, high) > 0.4
+
+
+def test_a_flight_launched_impossibly_fast_is_failed(padel):
+    """A flight faster than ``max_speed_ms`` at its contact is failed with the speed as the reason, not
+    reported reconstructed (on a broadcast clip a hit 2 frames before a net event fitted at 2,493 km/h):
+    with the limit just under the rally's fastest shot, exactly the shots above it fail."""
+    _, obs = padel
+    fit = fit_joint(obs, JointConfig(refit=False))
+    speeds = {s.segment.index: float(np.linalg.norm(s.velocity)) for s in fit.segments if s.ok and s.end is not None
+              and s.start is not None}
+    assert max(speeds.values()) < JointConfig().max_speed_ms
+    limit = max(speeds.values()) - 0.5
+    slow = fit_joint(obs, JointConfig(refit=False, max_speed_ms=limit))
+    by_index = {s.segment.index: s for s in slow.segments}
+    fast = [i for i, v in speeds.items() if v > limit]
+    assert fast
+    for i in fast:
+        assert not by_index[i].ok and "km/h" in by_index[i].reason
+    for s in slow.segments:           # a flight shares its first frame with the one before: that one may fail too
+        assert s.ok or ({s.segment.index, s.segment.index + 1} & set(fast) and "km/h" in s.reason)
+    assert slow.extra["plausibility"]["failed"] >= len(fast)
+
+
+def test_a_contact_below_the_floor_fails_its_flights(padel):
+    """A contact point is checked like the frames: a hit (or a contact on the net's unbounded plane) fitted
+    below the floor fails the flights on both sides of it, naming the contact, even where no whole frame of
+    the flights sinks (on a broadcast clip a net contact at z = −0.04 m was reported reconstructed)."""
+    _, obs = padel
+    cfg = JointConfig(refit=False)
+    fit = _fit_with_ends(obs, Plan([PlanContact(p, i) for i, p in enumerate(contact_priors(obs))]), cfg,
+                         FlightModel.from_ball(obs.court.ball), HitPrior.from_court(obs.court))
+    assert all(c.ok for c in fit.checks)
+    ch = fit.problem.chain
+    k = next(i for i, c in enumerate(ch.contacts) if c.kind == "hit")
+    ct = ch.contacts[k]
+    ct.origin = ct.origin - np.array([0.0, 0.0, 0.6])   # the contact point only: the flights' frames stay put
+    checks = check_flights(fit.problem, fit.sol, cfg)
+    touching = [s for s, f in enumerate(ch.flights) if k in (f.start, f.end)]
+    assert touching
+    for s in touching:
+        assert not checks[s].ok and "below the floor" in checks[s].reason and f"contact (frame {ct.frame})" in checks[s].reason
+    assert all(c.ok for s, c in enumerate(checks) if s not in touching)
