@@ -115,7 +115,11 @@ def test_bad_file_is_shown_in_the_page_keeps_the_clip_and_a_hostile_name_stays_t
     assert app.views[view.client.client_id] is view and view.clip.root.name == "0_good"  # previous clip kept
 
     page.get_by_role("button", name="open anyway, skip bad rows").click()
-    wait_until(lambda: app.views[view.client.client_id].clip.root.name == XSS_NAME, what="the clip opened")
+    def opened() -> bool:  # while the tab switches clips its old view is gone and the new one not yet made
+        current = app.views.get(view.client.client_id)
+        return current is not None and current.clip.root.name == XSS_NAME
+
+    wait_until(opened, what="the clip opened")
     new = app.views[view.client.client_id]
     assert set(new.session.ball) == {0, 2}
     wait_until(lambda: "1 bad row(s) left out" in body(page), what="the notice of the skipped row")
