@@ -21,10 +21,15 @@ from collections import OrderedDict
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+import logging
+
 import cv2
 import numpy as np
 
 from .errors import FormatError
+from .probe import COMB_THRESHOLD, comb_score, deinterlace, probe_video_file
+
+log = logging.getLogger(__name__)
 
 FRAME_NAME = re.compile(r"^(\d+)\.(jpg|jpeg|png)$", re.IGNORECASE)
 VIDEO_FIX = (
@@ -144,23 +149,53 @@ class FrameSource(ABC):
 
 # -------------------------------------------------------------------------------------------- video
 class VideoFrames(FrameSource):
-    """Frames of a video file, decoded with OpenCV."""
+    """Frames of a video file, decoded with OpenCV, presented at one constant rate and progressive.
+
+    The container is probed first (:mod:`.probe`, PyAV): its frame count and timestamps are taken from the
+    packets, a variable frame rate is resampled to a constant one (nearest timestamp) and interlaced video
+    is deinterlaced. ``notes`` says what was done (also logged as warnings).
+    """
 
     def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
         super().__init__(cache_size)
         self.path = Path(path)
         self._cap: cv2.VideoCapture | None = None
-        self._next = 0  # the frame the open capture will return next
+        self._next = 0  # the source frame the open capture will return next
+        self.notes: list[str] = []
+        self.probe = probe_video_file(self.path)
+        # OpenCV's FFmpeg backend returns blank frames for interlaced H.264 ("cannot convert interlaced to
+        # progressive"): such files are decoded with PyAV
+        self._pyav = self.probe is not None and self.probe.interlaced
         cap = self._capture()
-        self.fps = fps or (cap.get(cv2.CAP_PROP_FPS) or None)
-        self._n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-        first = self._remember(0, self._read_next(0))
+        self.fps = fps or (self.probe.fps if self.probe else None) or (cap.get(cv2.CAP_PROP_FPS) or None)
+        self._n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))  # OpenCV's duration × rate: right at a constant rate
+        if self._pyav:
+            self._n = self.probe.n_frames
+        self._map: np.ndarray | None = None  # constant-rate frame → source frame (variable frame rate only)
+        if self.probe is not None and self.probe.vfr and self.fps:
+            self._n = self.probe.n_frames  # the packets, not OpenCV's estimate
+            self._map = self.probe.cfr_map(self.fps)
+            self.notes.append(self.probe.timing_note(self.fps))
+        first = self._read_next(0)
         if self._n <= 0:
             self._n = self._count_frames()
+        self._field = self.probe.field_order if self.probe is not None and self.probe.interlaced else None
+        if self._field is None and (self.probe is None or self.probe.field_order == "unknown") \
+                and comb_score(first) > COMB_THRESHOLD:
+            self._field = "tt"  # unflagged, but the first frame is combed
+        if self._field is not None:
+            self.notes.append(f"{self.path.name}: interlaced video (field order {self._field}): deinterlaced "
+                              "(first field kept, the other interpolated; half the vertical detail)")
+        for note in self.notes:
+            log.warning(note)
+        first = self._remember(0, self._progressive(first))
         self.height, self.width = first.shape[:2]
 
     def __len__(self) -> int:
-        return self._n
+        return self._n if self._map is None else len(self._map)
+
+    def _progressive(self, frame: np.ndarray) -> np.ndarray:
+        return frame if self._field is None else deinterlace(frame, self._field)
 
     def close(self) -> None:
         super().close()
@@ -172,7 +207,7 @@ class VideoFrames(FrameSource):
             self._cap = None
 
     def _open(self) -> cv2.VideoCapture:
-        cap = cv2.VideoCapture(str(self.path))
+        cap = _PyAVCapture(self.path) if self._pyav else cv2.VideoCapture(str(self.path))
         if not cap.isOpened():
             raise FormatError(
                 self.path, "cannot open the video (corrupt or unsupported format)", fix=VIDEO_FIX
@@ -198,6 +233,11 @@ class VideoFrames(FrameSource):
         return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
     def _decode(self, index: int) -> np.ndarray:
+        source = index if self._map is None else int(self._map[index])
+        return self._progressive(self._decode_source(source))
+
+    def _decode_source(self, index: int) -> np.ndarray:
+        """Source frame ``index`` (decode order of presentation), as decoded."""
         cap = self._capture()
         if not self._next <= index <= self._next + MAX_GRAB_AHEAD:
             cap = self._cap = self._seek(cap, index)
@@ -209,10 +249,12 @@ class VideoFrames(FrameSource):
         return self._read_next(index)
 
     def _seek(self, cap: cv2.VideoCapture, index: int) -> cv2.VideoCapture:
-        """Position ``cap`` at ``index``; if its seek is inexact, decode forward from a fresh capture."""
-        cap.set(cv2.CAP_PROP_POS_FRAMES, index)
-        if int(cap.get(cv2.CAP_PROP_POS_FRAMES)) == index:
-            return cap
+        """Position ``cap`` at ``index``; if its seek is inexact (always assumed with irregular timestamps,
+        where OpenCV seeks by time), decode forward from a fresh capture."""
+        if self._map is None:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+            if int(cap.get(cv2.CAP_PROP_POS_FRAMES)) == index:
+                return cap
         cap.release()
         cap = self._open()
         for _ in range(index):
@@ -228,6 +270,19 @@ class VideoFrames(FrameSource):
         return n
 
     def _iter(self, start: int, stop: int) -> Iterator[np.ndarray]:
+        if self._map is None:
+            for frame in self._iter_source(start, stop):
+                yield self._progressive(frame)
+            return
+        wanted = self._map[start:stop]
+        source = self._iter_source(int(wanted[0]), int(wanted[-1]) + 1)
+        at, frame = int(wanted[0]) - 1, None
+        for j in wanted:  # repeated source frames are yielded again, skipped ones decoded and dropped
+            while at < j:
+                frame, at = next(source), at + 1
+            yield self._progressive(frame)
+
+    def _iter_source(self, start: int, stop: int) -> Iterator[np.ndarray]:
         cap = self._open()  # its own decoder, so random access during the loop does not disturb it
         try:
             if start:
@@ -243,6 +298,54 @@ class VideoFrames(FrameSource):
                 yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
         finally:
             cap.release()
+
+
+class _PyAVCapture:
+    """The part of ``cv2.VideoCapture``'s interface :class:`VideoFrames` uses, decoding with PyAV (sequential
+    only: it cannot seek, so the reader decodes forward)."""
+
+    def __init__(self, path: Path):
+        import av
+
+        self._av = av
+        try:
+            self._container = av.open(str(path))
+            self._stream = self._container.streams.video[0]
+            self._stream.thread_type = "AUTO"
+            self._frames = self._container.decode(self._stream)
+        except (av.FFmpegError, IndexError, OSError):
+            self._container = None
+
+    def isOpened(self) -> bool:  # noqa: N802 - OpenCV's name
+        return self._container is not None
+
+    def _next(self):
+        try:
+            return next(self._frames)
+        except (StopIteration, self._av.FFmpegError):
+            return None
+
+    def grab(self) -> bool:
+        return self._next() is not None
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        frame = self._next()
+        return (False, None) if frame is None else (True, frame.to_ndarray(format="bgr24"))
+
+    def get(self, prop: int) -> float:
+        if prop == cv2.CAP_PROP_FPS:
+            return float(self._stream.average_rate or 0)
+        if prop == cv2.CAP_PROP_FRAME_COUNT:
+            return float(self._stream.frames or 0)
+        return -1.0  # position unknown: seeking is never trusted
+
+    def set(self, prop: int, value: float) -> bool:
+        return False
+
+    def release(self) -> None:
+        if self._container is not None:
+            self._container.close()
+            self._container = None
 
 
 # ------------------------------------------------------------------------------------ frames folder
@@ -310,7 +413,8 @@ def write_video(
 
     Args:
         fourcc: ``mp4v`` (MPEG-4 part 2, OpenCV, fast), ``MJPG``, ... or ``h264`` (libx264 through PyAV,
-            ``ultrafast`` preset, since opencv-python-headless cannot encode H.264).
+            ``ultrafast`` preset, since opencv-python-headless cannot encode H.264; the container follows the
+            suffix: ``.mp4``, ``.mov`` or ``.mkv``).
         crf: H.264 quality (lower is better; 23 is libx264's default).
 
     The file appears atomically when all frames are written. Returns the number of frames.
@@ -361,7 +465,8 @@ class _H264Sink:
 
         import av
 
-        self.container = av.open(str(path), "w", format="mp4")
+        fmt = {".mov": "mov", ".mkv": "matroska", ".webm": "matroska"}.get(path.suffix.lower(), "mp4")
+        self.container = av.open(str(path), "w", format=fmt)
         rate = fractions.Fraction(fps).limit_denominator(1001)
         self.stream = self.container.add_stream("libx264", rate=rate)
         self.stream.width, self.stream.height = shape[1] - shape[1] % 2, shape[0] - shape[0] % 2
