@@ -153,7 +153,7 @@ class VideoFrames(FrameSource):
 
     The container is probed first (:mod:`.probe`, PyAV): its frame count and timestamps are taken from the
     packets, a variable frame rate is resampled to a constant one (nearest timestamp) and interlaced video
-    is deinterlaced. ``notes`` says what was done (also logged as warnings).
+    is deinterlaced. ``notes`` says what was done (also logged, level INFO).
     """
 
     def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
@@ -186,8 +186,8 @@ class VideoFrames(FrameSource):
         if self._field is not None:
             self.notes.append(f"{self.path.name}: interlaced video (field order {self._field}): deinterlaced "
                               "(first field kept, the other interpolated; half the vertical detail)")
-        for note in self.notes:
-            log.warning(note)
+        for note in self.notes:  # `rally3d infer` prints them once (prepare.video_notes); readers open often
+            log.info(note)
         first = self._remember(0, self._progressive(first))
         self.height, self.width = first.shape[:2]
 

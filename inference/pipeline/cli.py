@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> int:
     from inference.clipio import Clip
 
-    from .prepare import Cut, prepare
+    from .prepare import Cut, prepare, video_notes
     from .run import run_pipeline
     from .score import score
 
@@ -131,6 +131,8 @@ def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> i
     clip = prepared.clip
     print(f"rally3d infer: {source} → {clip.root} ({clip.info.width}×{clip.info.height}, {clip.info.fps:g} fps, "
           f"{clip.n_frames} frames)")
+    for note in video_notes(source if source.is_file() else clip.video_path):
+        print(f"rally3d infer: note: {note}")
     only = set(args.only.split(",")) if args.only else None
     report = run_pipeline(clip, cfg, only=only)
     print()

@@ -59,6 +59,18 @@ def probe_video(path: Path) -> tuple[int, int, float, int]:
         return src.width, src.height, float(src.fps), len(src)
 
 
+def video_notes(path: Path) -> list[str]:
+    """What the reader does to present ``path`` (a video file or clip folder) at a constant rate,
+    progressive: variable frame rate resampled, interlacing removed ([] when nothing, or not a video)."""
+    from inference.clipio.frames import FrameSource
+
+    try:
+        with FrameSource.open(path, cache_size=0) as src:
+            return list(getattr(src, "notes", []))
+    except (FormatError, OSError):
+        return []
+
+
 @dataclass(frozen=True)
 class Cut:
     """A stretch of a long video, in seconds: ``[start_s, end_s)`` (None: from the start / to the end)."""

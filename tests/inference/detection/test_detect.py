@@ -119,3 +119,40 @@ def test_mask_in_clip_yaml_hides_a_scoreboard_from_the_detector(clip, tmp_path):
     with pytest.raises(FormatError, match=r"clip.yaml.*mask entry 1") as e:
         BallDetectorRunner(YellowNet(), normalize="unit").run(Clip(masked))
     assert "normalised" in str(e.value)
+
+
+class ShapeRecordingYellowNet(YellowNet):
+    """YellowNet that records the input shapes it is given (a class list: the runner deep-copies the model)."""
+
+    shapes: list = []
+
+    def forward(self, x):
+        ShapeRecordingYellowNet.shapes.append(tuple(x.shape))
+        return super().forward(x)
+
+
+def test_4k_mov_is_downscaled_for_the_network_and_answers_in_4k_pixels(tmp_path):
+    """A 3840×2160 .mov at 50 fps: the network sees its own 288×512 input, ball.csv is in the 4K frame."""
+    import cv2
+
+    from inference.clipio import ClipInfo, write_video
+
+    n, w, h = 12, 3840, 2160
+    clip = Clip.create(tmp_path / "uhd", ClipInfo(sport="padel", fps=50.0, width=w, height=h, video="video.mov"))
+    truth = np.stack([600 + 230 * np.arange(n), 1700 - 90 * np.arange(n)], axis=1).astype(float)
+    frames = []
+    for p in truth:
+        img = np.full((h, w, 3), (40, 70, 140), np.uint8)
+        cv2.circle(img, tuple(np.round(p).astype(int)), 16, (215, 232, 62), -1, cv2.LINE_AA)
+        frames.append(img)
+    write_video(clip.video_path, frames, 50.0, fourcc="h264")
+    ShapeRecordingYellowNet.shapes.clear()
+    result = BallDetectorRunner(ShapeRecordingYellowNet(), normalize="unit", step=3).run(clip)
+    assert {s[1:] for s in ShapeRecordingYellowNet.shapes} == {(9, 288, 512)}
+    best = np.array([c.xy[0] for c in result.candidates])  # original pixels, best candidate per frame
+    err = np.linalg.norm(best - truth, axis=1)
+    assert err.max() < 8.0, err  # one network pixel is 7.5 px of the 4K frame
+    seen = result.track.visibility == 1
+    assert seen.sum() >= n - 2
+    px = result.track.to_pixels(w, h)[seen]
+    assert np.linalg.norm(px - truth[seen], axis=1).max() < 8.0
