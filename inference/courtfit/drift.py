@@ -79,7 +79,7 @@ class DriftReport:
         return "\n".join(lines + [self.summary()])
 
 
-def _samples(cam: Camera, court: Court, step_m: float = 0.1) -> np.ndarray:
+def court_line_samples(cam: Camera, court: Court, step_m: float = 0.1) -> np.ndarray:
     """(P, 2) full-resolution pixels of the court's floor lines inside the image."""
     model = court_lines(court)
     pts, _ = model.samples(step_m)
@@ -140,7 +140,7 @@ def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
     idx = list(range(0, n, max(1, int(round(every_s * fps)))))
     if idx[-1] != n - 1:
         idx.append(n - 1)
-    samples = _samples(camera, court)
+    samples = court_line_samples(camera, court)
     rects = clip_mask(clip)
     shifts, support = [], []
     with clip.frames(cache_size=0) as src:

@@ -152,45 +152,66 @@ class BallDetectorRunner:
             flush()
         return maps, seconds
 
-    def run(self, clip: Clip, progress: bool = False, tolerate_truncation: bool = False) -> DetectionResult:
+    def run(self, clip: Clip, progress: bool = False, tolerate_truncation: bool = False,
+            active: np.ndarray | None = None) -> DetectionResult:
         """Detect and track the ball over the whole clip (original-frame pixels).
 
         With ``tolerate_truncation`` a video that stops decoding early yields the frames before the damage
-        (``result.truncated`` says why) instead of raising :class:`FormatError`.
+        (``result.truncated`` says why) instead of raising :class:`FormatError`. ``active`` (N,) bool: only
+        these frames are searched (court-view shots, :mod:`inference.shots`); each run of active frames is
+        windowed and tracked on its own, the other frames have no candidates and no ball.
         """
         from tqdm import tqdm
+
+        from inference.shots import segments
 
         t0 = time.perf_counter()
         info = clip.info
         lb = Letterbox(info.width, info.height, self.net_size[1], self.net_size[0])
         truncated: list[str] = []
-        count = 0
         rects = clip_mask(clip)
+        maps: dict[int, list[np.ndarray]] = {}
+        seconds_net = 0.0
         with clip.frames(cache_size=0) as src:
             n = len(src)
-            bar = tqdm(total=n, desc=f"detect {clip.root.name}", unit="frame", disable=not progress)
+            runs = [(0, n)] if active is None else segments(np.asarray(active, bool)[:n])
+            bar = tqdm(total=sum(b - a for a, b in runs), desc=f"detect {clip.root.name}", unit="frame",
+                       disable=not progress)
 
-            def decoded():
-                nonlocal count
+            def decoded(start: int, stop: int):
+                nonlocal n
+                at = start
                 try:
-                    for frame in src.iter():
-                        count += 1
+                    for frame in src.iter(start, stop):
+                        at += 1
                         bar.update()
                         yield lb.warp(apply_mask(frame, rects))
                 except FormatError as e:  # a truncated or damaged video: keep what was decoded
                     if not tolerate_truncation:
                         raise
                     truncated.append(str(e))
+                    n = at
 
-            maps, seconds_net = self.heatmaps(decoded())
+            for start, stop in runs:
+                if truncated or start >= n:
+                    break
+                run_maps, seconds = self.heatmaps(decoded(start, stop))
+                maps.update({start + k: v for k, v in run_maps.items()})
+                seconds_net += seconds
             bar.close()
-            if truncated:
-                n = count
         candidates = []
         for i in range(n):
             per_window = [heatmaps_to_candidates(m[None], lb, self.postprocess)[0] for m in maps.get(i, [])]
             candidates.append(pool_candidates(per_window) if per_window else FrameCandidates.empty())
-        tracked = track_candidates(candidates, info.fps, self.tracker, (info.width, info.height))
+        tracked = TrackResult.empty(n)
+        for start, stop in runs:  # a track never crosses a cut
+            stop = min(stop, n)
+            if start >= stop:
+                continue
+            part = track_candidates(candidates[start:stop], info.fps, self.tracker, (info.width, info.height))
+            ids = np.where(part.track_id >= 0, part.track_id + int(tracked.track_id.max()) + 1, -1)
+            tracked.state[start:stop], tracked.xy[start:stop] = part.state, part.xy
+            tracked.score[start:stop], tracked.track_id[start:stop] = part.score, ids
         track = tracked.to_ball_track(info.width, info.height)
         return DetectionResult(candidates, tracked, track, seconds_net, time.perf_counter() - t0, n,
                                truncated[0] if truncated else None)

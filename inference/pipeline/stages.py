@@ -162,6 +162,43 @@ def _camera_outputs(ctx: Context) -> list[Path]:
     return [] if ctx.given_camera() or not computed else [ctx.clip.camera_path]
 
 
+# -------------------------------------------------------------------------------------------- shots
+def _shots_run(ctx: Context) -> Outcome:
+    from inference.shots import find_shots
+
+    from inference.clipio import FormatError
+    from inference.shots import Shot, ShotReport
+
+    clip = ctx.clip
+    camera = clip.read_camera() if clip.camera_path.is_file() else None
+    try:
+        report = find_shots(clip, camera, ctx.court, progress=ctx.cfg.progress)
+    except FormatError as e:  # a damaged video: no cut search, every frame goes on (detect keeps what decodes)
+        report = ShotReport([Shot(0, clip.n_frames, True, 0.0, "not measured")], clip.n_frames, clip.info.fps,
+                            [f"shots not measured ({e}); every frame is searched"])
+    if len(report.shots) > 1 or report.notes:
+        print("[shots]\n" + report.table())  # the terminal's view of shots.json
+    report.write(_shots_path(ctx))
+    return Outcome(report.n_frames, report.summary())
+
+
+def _shots_path(ctx: Context) -> Path:
+    return ctx.clip.root / "shots.json"
+
+
+def _court_frames(ctx: Context) -> np.ndarray | None:
+    """(N,) bool court-view frames from shots.json (None: no shots.json, every frame is processed)."""
+    from inference.shots import ShotReport
+
+    if not _shots_path(ctx).is_file():
+        return None
+    report = ShotReport.read(_shots_path(ctx))
+    if report.n_frames != ctx.clip.n_frames:
+        raise StageError(f"{_shots_path(ctx)} describes {report.n_frames} frames, the video has "
+                         f"{ctx.clip.n_frames} — delete it and re-run (the shots stage rewrites it)")
+    return report.active()
+
+
 # ------------------------------------------------------------------------------------------- detect
 def _weights_path(ctx: Context) -> Path:
     from inference.detection.detect import shipped_weights
@@ -183,11 +220,14 @@ def _detect_run(ctx: Context) -> Outcome:
     runner = BallDetectorRunner.from_weights(ctx.cfg.detector, _weights_path(ctx), trust=ctx.cfg.trust_checkpoint,
                                              step=ctx.cfg.step,
                                              batch_size=ctx.cfg.batch_size, device=ctx.cfg.device)
-    result = runner.run(ctx.clip, progress=ctx.cfg.progress, tolerate_truncation=True)
+    active = _court_frames(ctx)
+    result = runner.run(ctx.clip, progress=ctx.cfg.progress, tolerate_truncation=True, active=active)
     ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)
     write_ball_csv(ctx.detected_path, result.track)
     seen = int(np.sum(result.track.visibility > 0))
     note = f"ball in {seen}/{result.n_frames} frames"
+    if active is not None and not active.all():
+        note += f" ({int((~active).sum())} frames outside court views not searched, shots.json)"
     if ctx.cfg.detector_weights is None:
         from inference.detection.detect import SHIPPED_SPORT, shipped_weights
 
@@ -328,7 +368,9 @@ def build_stages() -> list[Stage]:
         Stage("camera", _camera_inputs,
               lambda ctx: {"court": str(ctx.clip.court_path()), "auto": ctx.cfg.auto_court}, _camera_outputs,
               _camera_run),
-        Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx)},
+        Stage("shots", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "clip_yaml": ctx.clip.clip_yaml_path},
+              lambda ctx: {"shots": 1}, lambda ctx: [_shots_path(ctx)], _shots_run),
+        Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx), "shots": _shots_path(ctx)},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
               lambda ctx: [ctx.detected_path], _detect_run),
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
