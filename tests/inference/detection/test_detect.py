@@ -156,3 +156,18 @@ def test_4k_mov_is_downscaled_for_the_network_and_answers_in_4k_pixels(tmp_path)
     assert seen.sum() >= n - 2
     px = result.track.to_pixels(w, h)[seen]
     assert np.linalg.norm(px - truth[seen], axis=1).max() < 8.0
+
+
+def test_only_active_frames_are_searched_and_tracks_stop_at_cuts(clip):
+    """``active`` (court-view shots): frames outside get no candidates and no ball; no track crosses the gap."""
+    active = np.ones(clip.n_frames, bool)
+    active[25:35] = False
+    result = BallDetectorRunner(YellowNet(), normalize="unit", batch_size=8).run(clip, active=active)
+    assert len(result.track) == clip.n_frames
+    assert all(result.candidates[i].count == 0 for i in range(25, 35))
+    assert not (result.track.visibility[25:35] > 0).any()
+    ids = result.tracked.track_id
+    before, after = set(ids[:25][ids[:25] >= 0]), set(ids[35:][ids[35:] >= 0])
+    assert before and after and not before & after
+    report = evaluate_ball_tracks(result.track, clip.read_ball(), 640, 360, tau_px=4.0, ignore_flags=(3,))
+    assert report.recall > 0.7, report.as_dict()

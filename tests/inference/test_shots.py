@@ -1,0 +1,122 @@
+"""Shot cuts in a broadcast-like clip: the padel sample with a close-up and another camera's footage (the tennis
+sample) spliced in. Cuts are found at the right frames, court views are told apart with and without a
+camera, and `rally3d infer` searches the court-view frames only."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from inference.camera import Camera
+from inference.clipio import Clip, FormatError, FrameSource, write_video
+from inference.court import load_court
+from inference.shots import ShotReport, find_shots
+
+SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample"
+CLOSEUP, OTHER = (80, 120), (160, 190)  # frames replaced by a close-up and by another camera
+BOUNDS = [0, 80, 120, 160, 190, 240]
+
+
+def closeup(frame: np.ndarray, zoom: float = 2.5, centre=(640, 420)) -> np.ndarray:
+    h, w = frame.shape[:2]
+    m = np.float32([[zoom, 0, w / 2 - zoom * centre[0]], [0, zoom, h / 2 - zoom * centre[1]]])
+    return cv2.warpAffine(frame, m, (w, h))
+
+
+def splice(root: Path, first: int, n: int, close: tuple[int, int], other_span: tuple[int, int]) -> Clip:
+    """Frames ``first .. first+n-1`` of the padel sample as a clip, with ``close`` (a close-up) and
+    ``other_span`` (the tennis sample's camera) replaced; ball.csv keeps the padel ground truth."""
+    shutil.copytree(SAMPLE / "padel_sample", root)
+    with FrameSource.open(SAMPLE / "padel_sample" / "video.mp4") as a, \
+            FrameSource.open(SAMPLE / "tennis_sample" / "video.mp4") as b:
+        court, other = list(a.iter(first, first + n)), list(b.iter(20, 20 + other_span[1] - other_span[0]))
+    frames = [closeup(f) if close[0] <= i < close[1] else other[i - other_span[0]]
+              if other_span[0] <= i < other_span[1] else f for i, f in enumerate(court)]
+    write_video(root / "video.mp4", frames, 30.0, fourcc="h264")
+    clip = Clip(root)
+    gt = clip.read_ball()
+    keep = (gt.frame >= first) & (gt.frame < first + n)
+    clip.write_ball(type(gt)(gt.frame[keep] - first, gt.visibility[keep], gt.xy[keep]))
+    text = (root / "clip.yaml").read_text().replace("n_frames: 240", f"n_frames: {n}")
+    (root / "clip.yaml").write_text(text)
+    return Clip(root)
+
+
+@pytest.fixture(scope="module")
+def spliced(tmp_path_factory) -> Clip:
+    return splice(tmp_path_factory.mktemp("shots") / "broadcast", 0, 240, CLOSEUP, OTHER)
+
+
+def _spans(report: ShotReport) -> list[int]:
+    return [s.start for s in report.shots] + [report.n_frames]
+
+
+def test_cuts_and_court_views_from_the_calibrated_court_lines(spliced):
+    report = find_shots(spliced, Camera.load(SAMPLE / "padel_sample" / "gt" / "camera.yaml"), load_court("padel"))
+    assert _spans(report) == BOUNDS, report.table()
+    assert [s.court_view for s in report.shots] == [True, False, True, False, True], report.table()
+    assert {s.how for s in report.shots} == {"court lines"}
+    active = report.active()
+    assert not active[80:120].any() and not active[160:190].any() and active[:80].all() and active[190:].all()
+    assert "70 frames outside court views left out (frames 80–119, 160–189)" in report.summary()
+
+
+def test_without_a_camera_the_main_view_is_the_longest_shot(spliced):
+    report = find_shots(spliced)
+    assert _spans(report) == BOUNDS
+    assert [s.court_view for s in report.shots] == [True, False, True, False, True], report.table()
+    assert {s.how for s in report.shots} == {"similarity"}
+
+
+def test_a_clip_without_cuts_is_one_court_view():
+    report = find_shots(Clip(SAMPLE / "padel_sample"), Camera.load(SAMPLE / "padel_sample" / "gt" / "camera.yaml"),
+                        load_court("padel"))
+    assert len(report.shots) == 1 and report.active().all() and report.n_frames == 240
+
+
+def test_shots_json_round_trip_and_bad_files(tmp_path, spliced):
+    report = find_shots(spliced)
+    path = report.write(tmp_path / "shots.json")
+    again = ShotReport.read(path)
+    assert again.shots == report.shots and again.n_frames == 240
+    data = json.loads(path.read_text())
+    data["shots"][1]["start"] = 85  # a gap between shots
+    path.write_text(json.dumps(data))
+    with pytest.raises(FormatError, match=r"shots.json.*without gaps.*fix: delete shots.json"):
+        ShotReport.read(path)
+    path.write_text('{"shots": [{"start": 0}]}')
+    with pytest.raises(FormatError, match="not a shots file"):
+        ShotReport.read(path)
+
+
+@pytest.mark.slow  # ~35 s CPU (the shipped WASB); the runner's `active` frames: test_detect.py, fast
+def test_infer_searches_court_views_only(tmp_path, capsys):
+    """The shots and detect stages on a spliced clip of 100 frames (clicked court points → camera): frames
+    of the close-up and the other camera come back unseen, the ball is still found in the court views."""
+    from inference.pipeline.run import run_pipeline
+    from inference.pipeline.stages import PipelineConfig
+
+    clip = splice(tmp_path / "clip", 60, 100, (30, 50), (70, 85))
+    gt = clip.read_ball()
+    (clip.root / "ball.csv").unlink()  # the pipeline writes its own
+    report = run_pipeline(clip, PipelineConfig(progress=False, pose="none"), only={"camera", "shots", "detect",
+                                                                                 "smooth"})
+    status = {s.name: s.status for s in report.stages}
+    assert status["shots"] == status["detect"] == "done", report.table()
+    out = capsys.readouterr().out
+    assert "[shots]" in out and "court view" in out
+    shots = ShotReport.read(clip.root / "shots.json")
+    assert _spans(shots) == [0, 30, 50, 70, 85, 100]
+    assert [s.court_view for s in shots.shots] == [True, False, True, False, True]
+    ball = clip.read_ball()
+    off = np.zeros(100, bool)
+    off[30:50] = off[70:85] = True
+    assert len(ball) == 100 and not (ball.visibility[off] > 0).any()
+    seen = (ball.visibility > 0) & (gt.visibility > 0) & ~off
+    px = np.linalg.norm((ball.xy[seen] - gt.xy[seen]) * [1280, 720], axis=1)
+    assert seen.sum() > 0.5 * ((gt.visibility > 0) & ~off).sum() and np.median(px) < 5, (seen.sum(), np.median(px))
+    assert "frames outside court views not searched" in next(s.note for s in report.stages if s.name == "detect")
