@@ -27,6 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", type=float, help="seconds: process the video from here (a clip cut from a long match "
                    "is written into --out)")
     p.add_argument("--end", type=float, help="seconds: process the video up to here")
+    p.add_argument("--mask", choices=["auto"], help="auto: hide static overlays (a scoreboard, a logo) from the "
+                   "detector: writes mask: auto into clip.yaml; the boxes found go to mask_auto.yaml/.jpg to check")
     p.add_argument("--out", type=Path, help="output clip folder (a video: default runs/infer/<stem>; a clip: in "
                    "place); with several inputs, the parent folder of one clip folder each")
     p.add_argument("--detector", type=Path, help="ball-detector checkpoint (default: the shipped weights)")
@@ -105,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_one(items[0], cfg, args)
     if args.start is not None or args.end is not None:
         raise ValueError("--start/--end cut one video; give a single input")
+    if args.mask:
+        raise ValueError("--mask auto takes a single input; for a dataset write 'mask: auto' in each clip.yaml")
     from .engine import predict_clips
 
     devices = int(args.devices) if str(args.devices).isdigit() else args.devices
@@ -122,13 +126,15 @@ def run(args: argparse.Namespace) -> int:
 def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> int:
     from inference.clipio import Clip
 
-    from .prepare import Cut, prepare, video_notes
+    from .prepare import Cut, prepare, request_auto_mask, video_notes
     from .run import run_pipeline
     from .score import score
 
     source, out = item
     prepared = prepare(source, out, args.court, args.camera, _court_points(args), Cut(args.start, args.end))
     clip = prepared.clip
+    if args.mask == "auto":
+        clip = request_auto_mask(clip)
     print(f"rally3d infer: {source} → {clip.root} ({clip.info.width}×{clip.info.height}, {clip.info.fps:g} fps, "
           f"{clip.n_frames} frames)")
     for note in video_notes(source if source.is_file() else clip.video_path):

@@ -184,6 +184,28 @@ def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path
     return Prepared(clip, source, None)
 
 
+def request_auto_mask(clip: Clip, log=print) -> Clip:
+    """Put ``mask: auto`` into ``clip``'s clip.yaml (``infer --mask auto``); the previous clip.yaml is kept
+    in ``.rally3d/backup/``. Rectangles already there win (a user's mask is never replaced)."""
+    from inference.clipio import write_clip_yaml
+    from inference.masks import AUTO
+
+    mask = clip.info.extra.get("mask")
+    if mask == AUTO:
+        return clip
+    if mask:
+        log(f"rally3d infer: {clip.clip_yaml_path} has its own mask rectangles; --mask auto is not applied")
+        return clip
+    from .state import backup_file
+
+    copy = backup_file(clip.root, clip.clip_yaml_path)
+    info = clip.info
+    info.extra = {**info.extra, "mask": AUTO}
+    write_clip_yaml(clip.clip_yaml_path, info)
+    log(f"rally3d infer: mask: auto written to {clip.clip_yaml_path} (previous file kept in {copy})")
+    return Clip(clip.root)
+
+
 def _new_clip(out: Path, info: ClipInfo, video: Path) -> Clip:
     """A clip folder at ``out`` whose clip.yaml points (relatively) at ``video``."""
     out.mkdir(parents=True, exist_ok=True)
