@@ -171,3 +171,49 @@ def test_only_active_frames_are_searched_and_tracks_stop_at_cuts(clip):
     assert before and after and not before & after
     report = evaluate_ball_tracks(result.track, clip.read_ball(), 640, 360, tau_px=4.0, ignore_flags=(3,))
     assert report.recall > 0.7, report.as_dict()
+
+
+def test_auto_mask_hides_a_burnt_in_scoreboard_from_the_detector(tmp_path):
+    """A noisy, drifting 640×360 clip with court lines, the ball and a score panel whose yellow serve dot
+    looks like a ball: with ``mask: auto`` the network gets no candidate inside the panel."""
+    import cv2
+
+    from inference.clipio import BallTrack, ClipInfo, write_video
+    from inference.masks import clip_mask
+
+    n, box = 60, (20, 15, 190, 60)
+    clip = Clip.create(tmp_path / "board", ClipInfo(sport="padel", fps=30.0, width=640, height=360, video="video.mp4",
+                                                    n_frames=n))
+    rng = np.random.default_rng(3)
+    t = np.arange(n) / 30.0
+    xy = np.stack([80 + 250 * t, 300 - 400 * t + 200 * t**2], axis=1)
+    frames = []
+    for i, p in enumerate(xy):
+        img = np.full((360, 640, 3), (40, 70, 140), np.uint8)
+        d = 5.0 * i / (n - 1)  # the camera creeps: the court's edges move, the panel's do not
+        for (x0, y0), (x1, y1) in (((60, 330), (580, 330)), ((150, 120), (490, 120)), ((60, 330), (150, 120)),
+                                   ((580, 330), (490, 120)), ((320, 120), (320, 330))):
+            cv2.line(img, (int(x0 + d), int(y0 - d)), (int(x1 + d), int(y1 - d)), (235, 235, 235), 2, cv2.LINE_AA)
+        cv2.circle(img, tuple(np.round(p).astype(int)), 5, (215, 232, 62), -1, cv2.LINE_AA)
+        img = np.clip(img + rng.normal(0, 3.0, img.shape), 0, 255).astype(np.uint8)
+        img[box[1]:box[3], box[0]:box[2]] = (25, 30, 70)
+        cv2.putText(img, "GALAN 6 4", (box[0] + 8, box[1] + 30), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2)
+        cv2.circle(img, (box[2] - 16, box[1] + 22), 5, (215, 232, 62), -1, cv2.LINE_AA)  # the serve dot
+        frames.append(img)
+    write_video(clip.video_path, frames, 30.0, fourcc="h264", crf=18)
+    clip.write_ball(BallTrack(np.arange(n), np.ones(n, np.int8), xy / [640, 360]))
+
+    def in_panel(c: Clip) -> tuple[int, float]:
+        result = BallDetectorRunner(YellowNet(), normalize="unit", batch_size=8).run(c)
+        hits = sum(int(np.any((fc.xy[:, 0] >= box[0]) & (fc.xy[:, 0] < box[2]) & (fc.xy[:, 1] >= box[1]) &
+                              (fc.xy[:, 1] < box[3]))) for fc in result.candidates if len(fc.xy))
+        recall = evaluate_ball_tracks(result.track, c.read_ball(), 640, 360, tau_px=4.0).recall
+        return hits, recall
+
+    hits, _ = in_panel(clip)
+    assert hits > 30  # the dot fires without a mask
+    (clip.root / "clip.yaml").write_text((clip.root / "clip.yaml").read_text() + "mask: auto\n")
+    rects = clip_mask(Clip(clip.root))
+    assert len(rects) == 1
+    hits, recall = in_panel(Clip(clip.root))
+    assert hits == 0 and recall > 0.8
