@@ -352,7 +352,7 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     # are listed in segments.json with their reason, and the run still counts as complete
     pl = fit.extra.get("plausibility", {})
     verdict = "" if not pl else (", plausible" if pl["plausible"] else
-                                 f", NOT plausible ({pl['frames_inside_court']:.0%} of frames inside the court)")
+                                 f", NOT plausible ({'; '.join(pl.get('not_plausible_because', []))})")
     return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed{verdict}")
 
 

@@ -53,7 +53,7 @@ def run_reconstruct(args: argparse.Namespace) -> int:
               f"{s.reproj_rms_px:>7.2f}")
     pl = fit.extra.get("plausibility", {})
     if pl:
-        verdict = "plausible" if pl["plausible"] else "NOT plausible"
+        verdict = "plausible" if pl["plausible"] else f"NOT plausible ({'; '.join(pl.get('not_plausible_because', []))})"
         print(f"plausibility: {verdict} — {pl['reconstructed']}/{pl['flights']} flights reconstructed, "
               f"{pl['frames_inside_court']:.1%} of frames inside the court, {pl['contacts_below_floor']} contacts "
               f"below the floor")

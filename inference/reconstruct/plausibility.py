@@ -245,6 +245,10 @@ def _other_labels(obs: Observations, prior) -> list[str]:
 # ---------------------------------------------------------------------------------------------------
 # The clip-level summary
 # ---------------------------------------------------------------------------------------------------
+#: a clip with more than this share of its flights failed is not plausible
+MAX_FAILED_SHARE = 0.25
+
+
 def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None) -> dict:
     """Clip-level plausibility of a reconstruction (segments.json's ``plausibility``): flights reconstructed
     and failed (with reasons), the share of frames inside the court, contacts below the floor, the worst
@@ -271,5 +275,14 @@ def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None)
     }
     if rms_limit_px:
         out["flights_over_rms_limit"] = over
-    out["plausible"] = bool(ok) and inside >= 0.98 and below == 0 and over == 0
+    # failed flights count too: a rally of which a third could not be reconstructed is no plausible replay
+    failed, n = len(fit.segments) - len(ok), len(fit.segments)
+    out["failed_share"] = round(failed / n, 4) if n else 0.0
+    why = (["no flight reconstructed"] if not ok else []) + \
+        ([f"{failed}/{n} flights failed"] if ok and failed / n > MAX_FAILED_SHARE else []) + \
+        ([f"{inside:.0%} of frames inside the court"] if inside < 0.98 else []) + \
+        ([f"{below} contacts below the floor"] if below else []) + \
+        ([f"{over} flights over the RMS limit"] if over else [])
+    out["not_plausible_because"] = why
+    out["plausible"] = not why
     return out

@@ -149,3 +149,21 @@ def test_a_contact_below_the_floor_fails_its_flights(padel):
     for s in touching:
         assert not checks[s].ok and "below the floor" in checks[s].reason and f"contact (frame {ct.frame})" in checks[s].reason
     assert all(c.ok for s, c in enumerate(checks) if s not in touching)
+
+
+def test_failed_flights_count_in_the_clip_verdict(padel):
+    """segments.json's clip-level ``plausible`` also judges the flights that failed, not only those reported."""
+    from inference.reconstruct.plausibility import MAX_FAILED_SHARE, summary
+
+    _, obs = padel
+    fit = reconstruct(obs)
+    n = len(fit.segments)
+    assert summary(fit, obs)["plausible"] and summary(fit, obs)["not_plausible_because"] == []
+    k = int(np.floor(MAX_FAILED_SHARE * n)) + 1  # just over the allowed share
+    segs = [replace(s, ok=False, reason="too few detections") if i < k else s for i, s in enumerate(fit.segments)]
+    pl = summary(replace(fit, segments=segs), obs)
+    assert pl["failed"] == k and pl["failed_share"] == pytest.approx(k / n, abs=1e-4)
+    assert not pl["plausible"] and f"{k}/{n} flights failed" in pl["not_plausible_because"]
+    if k > 1:  # one failed flight of many is still a plausible rally
+        one = [replace(s, ok=False, reason="too few detections") if i == 0 else s for i, s in enumerate(fit.segments)]
+        assert summary(replace(fit, segments=one), obs)["plausible"]
