@@ -150,3 +150,74 @@ def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
             support.append(sup)
     rms = camera.rms_px if camera.rms_px is not None else 0.0
     return DriftReport(idx, np.array(shifts).reshape(-1, 2), np.array(support), max(MIN_DRIFT_PX, 2 * rms), fps)
+
+
+# ------------------------------------------------------------------------------------ per-frame track
+CAMERA_TRACK = "camera_track.csv"
+TRACK_EVERY_S = 0.2
+
+
+@dataclass
+class CameraTrack:
+    """The calibrated camera per frame, as an image shift: frame ``i``'s picture is the calibrated camera's
+    moved by ``shift[i]`` px. For a "fixed" broadcast camera that pans or tilts by a fraction of a degree
+    this is the whole change (a rotation of θ moves the picture by about f·θ; the perspective change is of
+    second order); a camera that zooms or travels is not described.
+
+    Attributes:
+        shift: (N, 2) dx, dy px for every frame (linear between measured frames, held before the first and
+            after the last). measured: (N,) bool frames where the court was matched.
+    """
+
+    shift: np.ndarray
+    measured: np.ndarray
+
+    def stabilise(self, uv: np.ndarray) -> np.ndarray:
+        """(F, 2) pixels of frames 0..F-1 → where the calibrated camera sees the same points (``uv - shift``)."""
+        uv = np.asarray(uv, float)
+        n = min(len(uv), len(self.shift))
+        out = uv.copy()
+        out[:n] -= self.shift[:n]
+        return out
+
+    def write(self, path) -> None:
+        from inference.clipio.csvtable import format_floats, format_ints, write_csv
+
+        write_csv(path, ["frame", "dx_px", "dy_px", "measured"],
+                  [format_ints(np.arange(len(self.shift))), format_floats(self.shift[:, 0], 3),
+                   format_floats(self.shift[:, 1], 3), format_ints(self.measured.astype(int))])
+
+    @classmethod
+    def read(cls, path, n_frames: int) -> CameraTrack:
+        """``camera_track.csv`` (one row per frame ``0 … n_frames-1``); FormatError naming the file and row."""
+        from inference.clipio import FormatError
+        from inference.clipio.csvtable import CsvTable
+
+        t = CsvTable.read(path, ["frame", "dx_px", "dy_px", "measured"], allow_empty=False)
+        frame = t.ints("frame")
+        t.check_frames(frame, n_frames=n_frames)
+        if len(frame) != n_frames or np.any(frame != np.arange(n_frames)):
+            raise FormatError(path, f"needs one row per frame 0…{n_frames - 1} in order, has {len(frame)} rows",
+                              fix="delete camera_track.csv and re-run rally3d infer or calibrate --drift")
+        return cls(np.stack([t.floats("dx_px"), t.floats("dy_px")], axis=1), t.ints("measured") > 0)
+
+
+def track_camera(clip, camera: Camera, court: Court, every_s: float = TRACK_EVERY_S,
+                 max_shift_px: float = 24.0) -> tuple[CameraTrack, DriftReport]:
+    """Match the court every ``every_s`` seconds (:func:`measure_drift`) and interpolate the shift to every
+    frame; frames where the court is not found (a cut, a close-up) are bridged from their neighbours.
+
+    Raises:
+        ValueError: the court was found in no sampled frame.
+    """
+    report = measure_drift(clip, camera, court, every_s=every_s, max_shift_px=max_shift_px)
+    ok = report.valid
+    if not ok.any():
+        raise ValueError("the court's lines were found in no sampled frame: the camera cannot be tracked")
+    f = np.asarray(report.frames)[ok]
+    s = report.shifts[ok]
+    frames = np.arange(clip.n_frames)
+    shift = np.stack([np.interp(frames, f, s[:, 0]), np.interp(frames, f, s[:, 1])], axis=1)
+    measured = np.zeros(clip.n_frames, bool)
+    measured[f] = True
+    return CameraTrack(shift, measured), report

@@ -148,13 +148,20 @@ def _camera_run(ctx: Context) -> Outcome:
 def _drift_note(ctx: Context) -> str:
     """``; camera drift ...`` when the court moves in the video beyond the calibration (else "")."""
     from inference.clipio import FormatError
-    from inference.courtfit.drift import measure_drift
+    from inference.courtfit.drift import CAMERA_TRACK, measure_drift, track_camera
 
+    track_path = ctx.clip.root / CAMERA_TRACK
+    track_path.unlink(missing_ok=True)  # the camera stage owns it: a new calibration drops the old track
     try:
         report = measure_drift(ctx.clip, ctx.clip.read_camera(), ctx.court)
+        if not report.drifting:
+            return ""
+        track, _ = track_camera(ctx.clip, ctx.clip.read_camera(), ctx.court)
     except (FormatError, ValueError) as e:  # a drift check never sinks the calibration
         return f"; drift not measured ({e})"
-    return f"; warning: {report.summary()}" if report.drifting else ""
+    track.write(track_path)
+    return (f"; warning: {report.summary()}; the camera is tracked per frame ({CAMERA_TRACK}, measured at "
+            f"{int(track.measured.sum())} frames) and the 3D stage undoes the shift")
 
 
 def _camera_outputs(ctx: Context) -> list[Path]:
@@ -340,6 +347,11 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     if not clip.camera_path.is_file():
         raise Skip("no calibration")
     obs = Observations.from_clip(clip, court=ctx.court)
+    stabilised = _camera_track_path(ctx).is_file()
+    if stabilised:  # a drifting camera: the 2D ball moved back onto the calibrated camera's picture
+        from inference.courtfit.drift import CameraTrack
+
+        obs = obs.with_track(CameraTrack.read(_camera_track_path(ctx), clip.n_frames).stabilise(obs.uv))
     if not len(obs.event_frames):
         raise StageError(f"{clip.events_path}: needs at least one event (a bounce or a hit) to anchor the flight")
     fit = reconstruct(obs, ctx.cfg.method)
@@ -353,7 +365,12 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     pl = fit.extra.get("plausibility", {})
     verdict = "" if not pl else (", plausible" if pl["plausible"] else
                                  f", NOT plausible ({'; '.join(pl.get('not_plausible_because', []))})")
-    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed{verdict}")
+    shift = f"; 2D stabilised by {_camera_track_path(ctx).name}" if stabilised else ""
+    return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed{verdict}{shift}")
+
+
+def _camera_track_path(ctx: Context) -> Path:
+    return ctx.clip.root / "camera_track.csv"
 
 
 def _file(name: str) -> Callable[[Context], Path]:
@@ -384,7 +401,8 @@ def build_stages() -> list[Stage]:
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
               lambda ctx: {"pose": ctx.cfg.pose}, lambda ctx: [ctx.clip.players_path], _players_run),
         Stage("reconstruct", lambda ctx: {"ball": ctx.clip.ball_path, "events": ctx.clip.events_path,
-                                          "camera": camera(ctx), "players": ctx.clip.players_path},
+                                          "camera": camera(ctx), "players": ctx.clip.players_path,
+                                          "camera_track": _camera_track_path(ctx)},
               lambda ctx: {"method": ctx.cfg.method},
               lambda ctx: [ctx.clip.ball_3d_path, ctx.clip.segments_path], _reconstruct_run,
               requires=("events",)),
