@@ -304,14 +304,13 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
 # Residuals with a sparse Jacobian
 # ---------------------------------------------------------------------------------------------------
 class _Rows:
-    """Accumulates residual blocks and their sparse Jacobian entries."""
+    """Accumulates residual blocks and, lazily, their sparse Jacobian entries: the blocks are only evaluated
+    when :meth:`jacobian` is called (a rejected LM trial never pays for its Jacobian)."""
 
     def __init__(self, n: int, jac: bool):
         self.n, self.jac = n, jac
         self.r: list[np.ndarray] = []
-        self.I: list[np.ndarray] = []
-        self.Jc: list[np.ndarray] = []
-        self.Jv: list[np.ndarray] = []
+        self.pending: list[tuple[int, int, object]] = []
         self.m = 0
 
     def add(self, r: np.ndarray, blocks=None) -> None:
@@ -321,25 +320,31 @@ class _Rows:
         if not R:
             return
         if self.jac and blocks is not None:
-            rows = np.arange(self.m, self.m + R)
-            for cols, vals in blocks():
-                vals = np.asarray(vals, float).reshape(R, -1)
-                cols = np.broadcast_to(np.asarray(cols), vals.shape)
-                self.I.append(np.repeat(rows, vals.shape[1]))
-                self.Jc.append(cols.reshape(-1))
-                self.Jv.append(vals.reshape(-1))
+            self.pending.append((self.m, R, blocks))
         self.r.append(r)
         self.m += R
 
+    def residuals(self) -> np.ndarray:
+        return np.concatenate(self.r) if self.r else np.zeros(0)
+
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")
+    def jacobian(self) -> sparse.csr_matrix:
+        """(m, n) sparse Jacobian of every block added with ``blocks``."""
+        I, Jc, Jv = [], [], []
+        for m0, R, blocks in self.pending:
+            rows = np.arange(m0, m0 + R)
+            for cols, vals in blocks():
+                vals = np.asarray(vals, float).reshape(R, -1)
+                cols = np.broadcast_to(np.asarray(cols), vals.shape)
+                I.append(np.repeat(rows, vals.shape[1]))
+                Jc.append(cols.reshape(-1))
+                Jv.append(vals.reshape(-1))
+        if not I:
+            return sparse.csr_matrix((self.m, self.n))
+        return sparse.csr_matrix((np.concatenate(Jv), (np.concatenate(I), np.concatenate(Jc))), shape=(self.m, self.n))
+
     def result(self) -> tuple[np.ndarray, sparse.csr_matrix | None]:
-        r = np.concatenate(self.r) if self.r else np.zeros(0)
-        if not self.jac:
-            return r, None
-        if not self.I:
-            return r, sparse.csr_matrix((len(r), self.n))
-        J = sparse.csr_matrix((np.concatenate(self.Jv), (np.concatenate(self.I), np.concatenate(self.Jc))),
-                              shape=(len(r), self.n))
-        return r, J
+        return self.residuals(), (self.jacobian() if self.jac else None)
 
 
 def student_t(u: np.ndarray, dof: float) -> tuple[np.ndarray, np.ndarray]:
@@ -458,9 +463,15 @@ class Problem:
         return np.clip((frames - fl.F0[s]) * fl.direction[s], 0, fl.P.shape[2] - 1)
 
     # --- residuals -------------------------------------------------------------------------------
-    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
     def evaluate(self, theta: np.ndarray, jac: bool = True) -> tuple[np.ndarray, sparse.csr_matrix | None, dict]:
         """Residuals (m,), the sparse Jacobian (m, n) with ``jac``, and what the outputs need."""
+        rows, aux = self.assemble(theta, jac)
+        return (*rows.result(), aux)
+
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
+    def assemble(self, theta: np.ndarray, jac: bool = True) -> tuple[_Rows, dict]:
+        """The residual rows at θ (their Jacobian is evaluated on demand, :meth:`_Rows.jacobian`) and what the
+        outputs need; sets ``last_norm``."""
         ch, cfg = self.chain, self.cfg
         fl = self.flights(theta, perturb=jac)
         taus = self.taus(theta)
@@ -523,8 +534,7 @@ class Problem:
         if len(drag):
             rows.add((theta[drag] - 1.0) / cfg.drag_sigma,
                      lambda: [(drag[:, None], np.full((len(drag), 1), 1.0 / cfg.drag_sigma))])
-        r_all, J = rows.result()
-        return r_all, J, {"flights": fl, "owners": own, "taus": taus}
+        return rows, {"flights": fl, "owners": own, "taus": taus}
 
     def _incoming(self, theta: np.ndarray, fl: Flights, taus: np.ndarray, c: int):
         """The flight arriving at contact c: (flight index, v_in (3,), ω_in (3,), dv_in/dinputs (N_IN, 3) or
@@ -672,7 +682,7 @@ class Problem:
             if p[2] >= need:
                 continue
 
-            def blocks(s=s, k=k, fr=fr):
+            def blocks(s=s, k=k, fr=fr, P=P):
                 dz = ((1 - fr) * (fl.P[s, 1:, k, 2] - P[k, 2]) + fr * (fl.P[s, 1:, k + 1, 2] - fl.P[s, 0, k + 1, 2])) / EPS
                 return through(np.array([s]), -dz[None, :] / self.cfg.net_sigma)
 
@@ -783,8 +793,11 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
 
 
 def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
+    """Levenberg-Marquardt from θ; each trial is evaluated once (its Jacobian only when it is accepted), and
+    ``problem.last_norm`` is left at the returned θ."""
     cfg = problem.cfg
     r, J, aux = problem.evaluate(theta)
+    norm = problem.last_norm
     cost = float(r @ r)
     lam = LM_LAMBDA0
     it = 0
@@ -801,18 +814,19 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
                 lam *= LM_FACTOR
                 continue
             cand = problem.clamp(theta + step)
-            r2, _, _ = problem.evaluate(cand, jac=False)
+            rows, aux2 = problem.assemble(cand)
+            r2 = rows.residuals()
             cost2 = float(r2 @ r2)
             if np.isfinite(cost2) and cost2 < cost:
                 rel = (cost - cost2) / max(cost, 1e-12)
-                theta, cost = cand, cost2
-                r, J, aux = problem.evaluate(theta)
+                theta, cost, r, J, aux, norm = cand, cost2, r2, rows.jacobian(), aux2, problem.last_norm
                 lam = max(lam / LM_FACTOR, 1e-9)
                 improved = True
                 break
             lam *= LM_FACTOR
         if not improved or rel < cfg.tolerance:
             break
+    problem.last_norm = norm
     return Solution(theta, r, J, aux, it + 1)
 
 
