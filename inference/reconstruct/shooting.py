@@ -280,7 +280,7 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
     c[1] = c[1] * inp[:, 10]                                            # per-flight drag
     state = tuple(np.ascontiguousarray(inp[:, k]) for k in range(9))
     state = rk4_step(state, (f0 - inp[:, 9]) / fps, c)                  # from τ to the grid's first frame
-    k = stride if substeps == 1 and stride > 1 and L > 2 else 1
+    k = stride if substeps == 1 and stride > 1 else 1
     h = sgn * k / (fps * substeps)
     nodes = -(-(L - 1) // k) + 1                                        # steps cover frames 0 … L − 1
     P = np.empty((nodes, 3, len(inp)))
@@ -466,9 +466,20 @@ class Problem:
         return F0, dirn, tau_end, int(max(need.max(), 2))
 
     def flights(self, theta: np.ndarray, perturb: bool) -> Flights:
-        F0, dirn, tau_end, L = self.grid(theta)
-        return integrate(self.inputs(theta), F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb,
-                         self.stride)
+        return self.flights_batch([theta], perturb)[0]
+
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
+    def flights_batch(self, thetas: list[np.ndarray], perturb: bool) -> list[Flights]:
+        """The flights of several θ integrated in one batch (e.g. LM trials with different damping): each
+        θ's flights are the same as integrated alone, on a grid as long as the longest."""
+        grids = [self.grid(t) for t in thetas]
+        L = max(g[3] for g in grids)
+        F0, dirn, tau_end = (np.concatenate([g[i] for g in grids]) for i in range(3))
+        inputs = np.concatenate([self.inputs(t) for t in thetas])
+        fl = integrate(inputs, F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb, self.stride)
+        S = len(self.chain.flights)
+        return [Flights(*(a[b * S:(b + 1) * S] for a in (fl.F0, fl.direction, fl.P, fl.V, fl.end, fl.vend)))
+                for b in range(len(thetas))]
 
     def index(self, fl: Flights, s: np.ndarray, frames: np.ndarray) -> np.ndarray:
         """Grid index of ``frames`` in flights ``s``."""
@@ -481,11 +492,12 @@ class Problem:
         return (*rows.result(), aux)
 
     @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
-    def assemble(self, theta: np.ndarray, jac: bool = True) -> tuple[_Rows, dict]:
+    def assemble(self, theta: np.ndarray, jac: bool = True, fl: Flights | None = None) -> tuple[_Rows, dict]:
         """The residual rows at θ (their Jacobian is evaluated on demand, :meth:`_Rows.jacobian`) and what the
-        outputs need; sets ``last_norm``."""
+        outputs need; sets ``last_norm``. ``fl``: θ's flights when already integrated (with perturbations
+        when ``jac``)."""
         ch, cfg = self.chain, self.cfg
-        fl = self.flights(theta, perturb=jac)
+        fl = fl if fl is not None else self.flights(theta, perturb=jac)
         taus = self.taus(theta)
         rows = _Rows(ch.n, jac)
         cols, M = self.cols, self.M
@@ -804,9 +816,15 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     return sol
 
 
+#: LM trials integrated together: the first batch (the usual damping and the next one up), then the rest
+LM_BATCHES = (2, 3, 3)
+
+
 def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
-    """Levenberg-Marquardt from θ; each trial is evaluated once (its Jacobian only when it is accepted), and
-    ``problem.last_norm`` is left at the returned θ."""
+    """Levenberg-Marquardt from θ. Up to 8 trials per iteration, the damping ×10 after each rejected one;
+    trials are integrated in batches (:data:`LM_BATCHES`, one pass of the integrator each) but judged in order,
+    so the path is that of trying them one at a time. A trial's Jacobian is assembled only when it is
+    accepted; ``problem.last_norm`` is left at the returned θ."""
     cfg = problem.cfg
     r, J, aux = problem.evaluate(theta)
     norm = problem.last_norm
@@ -819,23 +837,28 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
         g = J.T @ r
         D = np.maximum(np.diag(A), 1e-9)
         improved = False
-        for _ in range(8):
-            try:
-                step = -np.linalg.solve(A + lam * np.diag(D), g)
-            except np.linalg.LinAlgError:
+        for size in LM_BATCHES:
+            trials = []                                   # (damping, θ) of the next ``size`` attempts
+            for _ in range(size):
+                try:
+                    step = -np.linalg.solve(A + lam * np.diag(D), g)
+                    trials.append((lam, problem.clamp(theta + step)))
+                except np.linalg.LinAlgError:
+                    pass
                 lam *= LM_FACTOR
-                continue
-            cand = problem.clamp(theta + step)
-            rows, aux2 = problem.assemble(cand)
-            r2 = rows.residuals()
-            cost2 = float(r2 @ r2)
-            if np.isfinite(cost2) and cost2 < cost:
-                rel = (cost - cost2) / max(cost, 1e-12)
-                theta, cost, r, J, aux, norm = cand, cost2, r2, rows.jacobian(), aux2, problem.last_norm
-                lam = max(lam / LM_FACTOR, 1e-9)
-                improved = True
+            flights = problem.flights_batch([c for _, c in trials], perturb=True) if trials else []
+            for (lam_c, cand), fl in zip(trials, flights):
+                rows, aux2 = problem.assemble(cand, fl=fl)
+                r2 = rows.residuals()
+                cost2 = float(r2 @ r2)
+                if np.isfinite(cost2) and cost2 < cost:
+                    rel = (cost - cost2) / max(cost, 1e-12)
+                    theta, cost, r, J, aux, norm = cand, cost2, r2, rows.jacobian(), aux2, problem.last_norm
+                    lam = max(lam_c / LM_FACTOR, 1e-9)
+                    improved = True
+                    break
+            if improved:
                 break
-            lam *= LM_FACTOR
         if not improved or rel < cfg.tolerance:
             break
     problem.last_norm = norm
