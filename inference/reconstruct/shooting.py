@@ -33,7 +33,7 @@ import numpy as np
 from scipy import sparse
 
 from inference.court import Court, Material, Plane
-from inference.physics import FlightModel, bounce, rk4_step
+from inference.physics import FlightModel, bounce, rk4_step, spin_factors
 
 from .observations import ContactPrior, Observations
 
@@ -282,6 +282,7 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
     state = rk4_step(state, (f0 - inp[:, 9]) / fps, c)                  # from τ to the grid's first frame
     k = stride if substeps == 1 and stride > 1 else 1
     h = sgn * k / (fps * substeps)
+    factors = spin_factors(h, c[5])
     nodes = -(-(L - 1) // k) + 1                                        # steps cover frames 0 … L − 1
     P = np.empty((nodes, 3, len(inp)))
     Vv = np.empty((nodes, 3, len(inp)))
@@ -290,7 +291,7 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
         Vv[j] = state[3:6]
         if j < nodes - 1:
             for _ in range(substeps):
-                state = rk4_step(state, h, c)
+                state = rk4_step(state, h, c, factors)
     if k > 1:                                                           # frames between the steps
         a = np.minimum(np.arange(L) // k, nodes - 2)
         u = (np.arange(L) / k - a)[:, None, None]
@@ -579,6 +580,7 @@ class Problem:
         """The impact model at floor/glass contacts with flights on both sides."""
         ch, cfg = self.chain, self.cfg
         r_ball = self.obs.court.ball.radius
+        todo = []
         for c, ct in enumerate(ch.contacts):
             if ct.material is None or ct.normal is None:
                 continue
@@ -586,16 +588,24 @@ class Problem:
             inc = self._incoming(theta, fl, taus, c)
             if not out or inc is None:
                 continue
-            so, (si, vin, win, dvin, decay) = out[0], inc
-            n = ct.normal
-            if vin @ n > -0.3:      # not moving into the surface: nothing to model
+            if inc[1] @ ct.normal > -0.3:      # not moving into the surface: nothing to model
                 continue
-            mat = ct.material
-            x0 = np.concatenate([vin, win])
-            X = np.repeat(x0[None], 7, axis=0)
-            X[1:4, :3] += np.eye(3) * 1e-4
-            X[4:7, 3:] += np.eye(3) * 1e-2
-            vo, wo = bounce(X[:, :3], X[:, 3:], n, mat.restitution, mat.friction, r_ball)
+            todo.append((ct, out[0], inc))
+        if not todo:
+            return
+        # the impact model of every contact and its 6 perturbations (v_in, ω_in) in one call
+        X = np.repeat(np.stack([np.concatenate([inc[1], inc[2]]) for _, _, inc in todo]), 7, axis=0)
+        X = X.reshape(len(todo), 7, 6)
+        X[:, 1:4, :3] += np.eye(3) * 1e-4
+        X[:, 4:7, 3:] += np.eye(3) * 1e-2
+        X = X.reshape(-1, 6)
+        rep = np.repeat(np.arange(len(todo)), 7)
+        VO, WO = bounce(X[:, :3], X[:, 3:], np.stack([ct.normal for ct, _, _ in todo])[rep],
+                        np.array([ct.material.restitution for ct, _, _ in todo])[rep],
+                        np.array([ct.material.friction for ct, _, _ in todo])[rep], r_ball)
+        for q, (ct, so, (si, vin, win, dvin, decay)) in enumerate(todo):
+            n = ct.normal
+            vo, wo = VO[7 * q:7 * q + 7], WO[7 * q:7 * q + 7]
             speed = float(np.linalg.norm(vin))
             vn = abs(float(vin @ n))
             s_n = cfg.bounce_sigma_normal * vn + cfg.bounce_sigma_floor
