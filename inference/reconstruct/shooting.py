@@ -293,9 +293,15 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
             for _ in range(substeps):
                 state = rk4_step(state, h, c, factors)
     if k > 1:                                                           # frames between the steps
-        a = np.minimum(np.arange(L) // k, nodes - 2)
-        u = (np.arange(L) / k - a)[:, None, None]
-        P, Vv = hermite(P[a], Vv[a], P[a + 1], Vv[a + 1], u, h[None, None, :])
+        Pf, Vf = np.empty((L, 3, len(inp))), np.empty((L, 3, len(inp)))
+        m = len(range(0, L, k))
+        Pf[0::k], Vf[0::k] = P[:m], Vv[:m]
+        for q in range(1, k):                                           # frames q, q + k, … between nodes
+            m = len(range(q, L, k))
+            if m:
+                u = (np.arange(q, L, k) / k - np.arange(m))[:, None, None]
+                Pf[q::k], Vf[q::k] = hermite(P[:m], Vv[:m], P[1:m + 1], Vv[1:m + 1], u, h[None, None, :])
+        P, Vv = Pf, Vf
     P = P.transpose(2, 0, 1).reshape(S, V_, L, 3)
     Vv = Vv.transpose(2, 0, 1).reshape(S, V_, L, 3)
     end = np.zeros((S, V_, 3))
