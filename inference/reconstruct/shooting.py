@@ -99,7 +99,7 @@ class ShootingConfig:
     reweighted_iter: int = 6
     tolerance: float = 1e-3            # stop when the cost falls by less than this fraction (bench_joint: 1e-4 is no better)
     steps_per_second: float = 12.5    # RK4 steps per second at least; at 25+ fps one step spans several frames
-    #                                   (Hermite between): < 0.05 mm from 1 step per frame at up to 100 rad/s spin
+    #                                   (Hermite between): ≤ 0.2 mm from one step per frame up to 70 m/s
 
 
 # ---------------------------------------------------------------------------------------------------
