@@ -352,9 +352,10 @@ class _Rows:
             rows = np.arange(m0, m0 + R)
             for cols, vals in blocks():
                 vals = np.asarray(vals, float).reshape(R, -1)
-                cols = np.broadcast_to(np.asarray(cols), vals.shape)
+                full = np.empty(vals.shape, np.int64)
+                full[...] = cols                                        # broadcast the column indices
                 I.append(np.repeat(rows, vals.shape[1]))
-                Jc.append(cols.reshape(-1))
+                Jc.append(full.reshape(-1))
                 Jv.append(vals.reshape(-1))
         if not I:
             return sparse.csr_matrix((self.m, self.n))
@@ -820,14 +821,14 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     sol = lm(problem, problem.clamp(theta), max_iter or cfg.max_iter)
     problem.physics = True
     n = sol.iterations
-    sol = lm(problem, sol.theta, max_iter or cfg.max_iter)
+    sol = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
     sol.iterations += n
     for _ in range(cfg.irls_passes - 1):
         problem.reweight()
         if np.all(problem.weights == 1.0):
             break
         n = sol.iterations
-        sol = lm(problem, sol.theta, cfg.reweighted_iter)
+        sol = lm(problem, sol.theta, cfg.reweighted_iter, sol.aux["flights"])
         sol.iterations += n
     return sol
 
@@ -836,13 +837,15 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
 LM_BATCHES = (2, 3, 3)
 
 
-def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
-    """Levenberg-Marquardt from θ. Up to 8 trials per iteration, the damping ×10 after each rejected one;
-    trials are integrated in batches (:data:`LM_BATCHES`, one pass of the integrator each) but judged in order,
-    so the path is that of trying them one at a time. A trial's Jacobian is assembled only when it is
-    accepted; ``problem.last_norm`` is left at the returned θ."""
+def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | None = None) -> Solution:
+    """Levenberg-Marquardt from θ (``flights``: θ's flights when a previous pass integrated them). Up to 8
+    trials per iteration, the damping ×10 after each rejected one; trials are integrated in batches
+    (:data:`LM_BATCHES`, one pass of the integrator each) but judged in order, so the path is that of trying
+    them one at a time. A trial's Jacobian is assembled only when it is accepted; ``problem.last_norm`` is
+    left at the returned θ."""
     cfg = problem.cfg
-    r, J, aux = problem.evaluate(theta)
+    rows, aux = problem.assemble(theta, fl=flights)
+    r, J = rows.result()
     norm = problem.last_norm
     cost = float(r @ r)
     lam = LM_LAMBDA0
