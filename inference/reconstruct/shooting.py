@@ -766,7 +766,7 @@ class Problem:
         theta = theta.copy()
         prev = -np.inf
         for ct in ch.contacts:
-            t = np.clip(theta[ct.tau], ct.frame - cfg.tau_window, ct.frame + cfg.tau_window)
+            t = min(max(theta[ct.tau], ct.frame - cfg.tau_window), ct.frame + cfg.tau_window)
             t = max(t, prev + 0.5)
             theta[ct.tau] = t
             prev = t
@@ -776,7 +776,7 @@ class Problem:
             if ct.kind != "hit":
                 continue
             p = theta[ct.coords]
-            p[2] = np.clip(p[2], max(lo, r_ball), hi)
+            p[2] = min(max(p[2], max(lo, r_ball)), hi)
             h = ct.prior.hitter_xy
             if h is not None:
                 off = p[:2] - h
