@@ -22,8 +22,9 @@ Residuals (each divided by its σ):
 * weak priors: τ near its event frame, spin towards 0, drag multiplier towards 1.
 
 Jacobian by forward differences of the flights' 11 inputs, all flights and perturbations integrated in one
-vectorised batch, assembled as a sparse matrix (each row touches at most a few dozen unknowns); the normal
-equations are small and solved densely.
+vectorised batch (RK4 steps spanning several frames at 25+ fps, Hermite between), assembled as a sparse
+matrix (each row touches at most a few dozen unknowns) only for accepted LM trials; the trials of an LM
+iteration are integrated together; the normal equations are small and solved densely.
 """
 from __future__ import annotations
 
