@@ -22,7 +22,7 @@ Residuals (each divided by its σ):
 * weak priors: τ near its event frame, spin towards 0, drag multiplier towards 1.
 
 Jacobian by forward differences of the flights' 11 inputs, all flights and perturbations integrated in one
-vectorised batch (RK4 steps spanning several frames at 25+ fps, Hermite between), assembled as a sparse
+vectorised batch (RK4 steps spanning several frames at 30+ fps, Hermite between), assembled as a sparse
 matrix (each row touches at most a few dozen unknowns) only for accepted LM trials; the trials of an LM
 iteration are integrated together; the normal equations are small and solved densely.
 """
@@ -99,7 +99,7 @@ class ShootingConfig:
     irls_passes: int = 3
     reweighted_iter: int = 6
     tolerance: float = 1e-3            # stop when the cost falls by less than this fraction (bench_joint: 1e-4 is no better)
-    steps_per_second: float = 12.5    # RK4 steps per second at least; at 25+ fps one step spans several frames
+    steps_per_second: float = 15.0    # RK4 steps per second at least; at 30+ fps one step spans several frames
     #                                   (Hermite between): ≤ 0.2 mm from one step per frame up to 70 m/s
 
 
@@ -256,8 +256,13 @@ def hermite(p0, v0, p1, v1, u, dt):
     return pos, vel
 
 
+#: input columns whose perturbation is a translation: a flight does not depend on where it starts
+TRANSLATION = (0, 1, 2)
+
+
 def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int, tau_end: np.ndarray,
-              fps: float, model: FlightModel, substeps: int, perturb: bool = True, stride: int = 1) -> Flights:
+              fps: float, model: FlightModel, substeps: int, perturb: bool = True, stride: int = 1,
+              integrated: tuple[int, ...] | None = None) -> Flights:
     """Integrate S flights, each with its N_IN forward-difference perturbations, in one batch.
 
     Args:
@@ -268,15 +273,20 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
             frame rates one step spans ``stride`` frames and the frames between are cubic Hermite
             interpolations of its ends).
         perturb: also the N_IN perturbations of each flight (else only the base).
+        integrated: the input columns whose perturbations are integrated (default: all); the position
+            columns (:data:`TRANSLATION`) are otherwise the base moved by their step, any other column left
+            out is taken to have no effect (e.g. the drag scale when it is not fitted).
     """
     S = len(inputs)
     V_ = 1 + N_IN if perturb else 1
-    inp = np.repeat(inputs[:, None, :], V_, axis=1)                     # (S, V_, N_IN)
+    cols = np.arange(N_IN) if integrated is None else np.asarray(integrated, int)
+    Vi = 1 + len(cols) if perturb else 1                                # variants integrated
+    inp = np.repeat(inputs[:, None, :], Vi, axis=1)                     # (S, Vi, N_IN)
     if perturb:
-        inp[:, 1:, :] += np.diag(EPS)[None]
+        inp[:, 1:, :] += np.diag(EPS)[cols][None]
     inp = inp.reshape(-1, N_IN)
-    f0 = np.repeat(F0, V_).astype(float)
-    sgn = np.repeat(direction, V_).astype(float)
+    f0 = np.repeat(F0, Vi).astype(float)
+    sgn = np.repeat(direction, Vi).astype(float)
     c = list(model.kernel())
     c[1] = c[1] * inp[:, 10]                                            # per-flight drag
     state = tuple(np.ascontiguousarray(inp[:, k]) for k in range(9))
@@ -303,8 +313,15 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
                 u = (np.arange(q, L, k) / k - np.arange(m))[:, None, None]
                 Pf[q::k], Vf[q::k] = hermite(P[:m], Vv[:m], P[1:m + 1], Vv[1:m + 1], u, h[None, None, :])
         P, Vv = Pf, Vf
-    P = P.transpose(2, 0, 1).reshape(S, V_, L, 3)
-    Vv = Vv.transpose(2, 0, 1).reshape(S, V_, L, 3)
+    P = P.transpose(2, 0, 1).reshape(S, Vi, L, 3)
+    Vv = Vv.transpose(2, 0, 1).reshape(S, Vi, L, 3)
+    if Vi < V_:                                                         # the variants not integrated
+        P_, V2 = np.repeat(P[:, :1], V_, axis=1), np.repeat(Vv[:, :1], V_, axis=1)
+        P_[:, 1 + cols], V2[:, 1 + cols] = P[:, 1:], Vv[:, 1:]
+        for q in TRANSLATION:
+            if q not in cols:
+                P_[:, 1 + q, :, q] += EPS[q]
+        P, Vv = P_, V2
     end = np.zeros((S, V_, 3))
     vend = np.zeros((S, V_, 3))
     has = np.isfinite(tau_end)
@@ -385,6 +402,8 @@ class Problem:
         self.fps = obs.fps
         self.substeps = max(1, int(np.ceil(cfg.steps_per_second / obs.fps)))
         self.stride = max(1, int(obs.fps // cfg.steps_per_second))     # frames per RK4 step at high frame rates
+        #: perturbations integrated: velocity, spin, τ and the drag scale when fitted (positions: translations)
+        self.integrated = tuple(range(3, 10)) + ((10,) if cfg.fit_drag else ())
         frames = np.arange(chain.first_frame, chain.last_frame + 1)
         seen = np.isfinite(obs.uv[frames]).all(axis=1)
         self.frames = frames[seen]
@@ -485,7 +504,8 @@ class Problem:
         L = max(g[3] for g in grids)
         F0, dirn, tau_end = (np.concatenate([g[i] for g in grids]) for i in range(3))
         inputs = np.concatenate([self.inputs(t) for t in thetas])
-        fl = integrate(inputs, F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb, self.stride)
+        fl = integrate(inputs, F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb, self.stride,
+                       self.integrated)
         S = len(self.chain.flights)
         return [Flights(*(a[b * S:(b + 1) * S] for a in (fl.F0, fl.direction, fl.P, fl.V, fl.end, fl.vend)))
                 for b in range(len(thetas))]
