@@ -418,6 +418,7 @@ class Problem:
         self._wall_frames = [(w, w.normal, w.origin + r_ball * w.normal) for w in self._walls]
         self._layout_inputs()
         self.last_norm = np.zeros(len(self.frames))
+        self.norm_at: np.ndarray | None = None        # the θ of last_norm
         #: the impact model and the court's walls take part (off in the first pass: their hinges and the
         #: impact of a flight that is still far off send LM into poor minima)
         self.physics = True
@@ -542,7 +543,7 @@ class Problem:
         pix = self.obs.camera.project(pts.reshape(-1, 3)).reshape(len(j), pts.shape[1], 2)
         r = (pix[:, 0] - self.uv) / cfg.pixel_sigma
         r = np.where(np.isfinite(r), r, 1e3)                                # behind the camera: far off
-        self.last_norm = np.linalg.norm(r, axis=1)
+        self.last_norm, self.norm_at = np.linalg.norm(r, axis=1), theta
         w = self.weights
 
         def reproj_blocks():
@@ -901,7 +902,7 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
                 break
         if not improved or rel < cfg.tolerance:
             break
-    problem.last_norm = norm
+    problem.last_norm, problem.norm_at = norm, theta
     return Solution(theta, r, J, aux, it + 1)
 
 
