@@ -116,6 +116,11 @@ def _acceleration(vx, vy, vz, wx, wy, wz, c):
     return d * vx + m * cx, d * vy + m * cy, d * vz + m * cz - gravity
 
 
+def spin_factors(h, lam: float) -> tuple:
+    """RK4 stage factors of the spin decay for a step ``h`` (a float or a (B,) array; see :func:`rk4_step`)."""
+    return _spin_factors.__wrapped__(h, lam)
+
+
 @lru_cache(maxsize=256)
 def _spin_factors(h: float, lam: float) -> tuple[float, float, float, float]:
     """RK4 stage factors of the linear spin decay dω/dt = -λω: ω at stages 2, 3, 4 and after the step."""
@@ -126,18 +131,21 @@ def _spin_factors(h: float, lam: float) -> tuple[float, float, float, float]:
     return f2, f3, f4, 1.0 - q + q * q / 2.0 - q**3 / 6.0 + q**4 / 24.0
 
 
-def rk4_step(state: tuple, h: float, c: tuple[float, ...]) -> tuple:
+def rk4_step(state: tuple, h: float, c: tuple[float, ...], factors: tuple | None = None) -> tuple:
     """One RK4 step of size ``h`` (s) on a 9-component state.
 
     Args:
         state: (x, y, z, vx, vy, vz, wx, wy, wz), each a float or an array of one shape (B,).
         h: step (s), > 0; a float, or a (B,) array of per-ball steps.
         c: ``FlightModel.kernel()``.
+        factors: ``spin_factors(h, c[5])`` when the caller repeats one ``h`` (saves recomputing them).
     Returns:
         the state after ``h``, same layout.
     """
     x, y, z, vx, vy, vz, wx, wy, wz = state
-    if isinstance(h, np.ndarray):  # one step size per ball
+    if factors is not None:
+        f2, f3, f4, fn = factors
+    elif isinstance(h, np.ndarray):  # one step size per ball
         f2, f3, f4, fn = _spin_factors.__wrapped__(h, c[5])
     else:
         f2, f3, f4, fn = _spin_factors(h, c[5])

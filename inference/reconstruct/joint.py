@@ -392,7 +392,8 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
         if isinstance(fit, str):
             fits = [SegmentFit.failed(s, fit) for s in segs]
         else:
-            fits = _segment_fits(obs, segs, fit, cfg)
+            with threadpool_limits(1):  # the covariance's eigendecomposition too (threads: 10× the CPU time)
+                fits = _segment_fits(obs, segs, fit, cfg)
             extra["iterations"] = [fit.sol.iterations]
             if fit.plan.notes:
                 extra["refits"] = list(fit.plan.notes)

@@ -22,8 +22,9 @@ Residuals (each divided by its σ):
 * weak priors: τ near its event frame, spin towards 0, drag multiplier towards 1.
 
 Jacobian by forward differences of the flights' 11 inputs, all flights and perturbations integrated in one
-vectorised batch, assembled as a sparse matrix (each row touches at most a few dozen unknowns); the normal
-equations are small and solved densely.
+vectorised batch (RK4 steps spanning several frames at 30+ fps, Hermite between), assembled as a sparse
+matrix (each row touches at most a few dozen unknowns) only for accepted LM trials; the trials of an LM
+iteration are integrated together; the normal equations are small and solved densely.
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ import numpy as np
 from scipy import sparse
 
 from inference.court import Court, Material, Plane
-from inference.physics import FlightModel, bounce, rk4_step
+from inference.physics import FlightModel, bounce, rk4_step, spin_factors
 
 from .observations import ContactPrior, Observations
 
@@ -98,7 +99,8 @@ class ShootingConfig:
     irls_passes: int = 3
     reweighted_iter: int = 6
     tolerance: float = 1e-3            # stop when the cost falls by less than this fraction (bench_joint: 1e-4 is no better)
-    steps_per_second: float = 20.0    # RK4 steps per second at least (one per frame is < 1 µm off at 30 fps)
+    steps_per_second: float = 15.0    # RK4 steps per second at least; at 30+ fps one step spans several frames
+    #                                   (Hermite between): ≤ 0.2 mm from one step per frame up to 70 m/s
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -254,39 +256,72 @@ def hermite(p0, v0, p1, v1, u, dt):
     return pos, vel
 
 
+#: input columns whose perturbation is a translation: a flight does not depend on where it starts
+TRANSLATION = (0, 1, 2)
+
+
 def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int, tau_end: np.ndarray,
-              fps: float, model: FlightModel, substeps: int, perturb: bool = True) -> Flights:
+              fps: float, model: FlightModel, substeps: int, perturb: bool = True, stride: int = 1,
+              integrated: tuple[int, ...] | None = None) -> Flights:
     """Integrate S flights, each with its N_IN forward-difference perturbations, in one batch.
 
     Args:
         inputs: (S, N_IN) [C | v | ω | τ | drag scale] at τ_s (frames).
         F0: (S,) the grid's first frame; direction: (S,) +1 forwards, −1 backwards; L: frames on the grid.
         tau_end: (S,) τ of the end contact (NaN: none).
+        substeps: RK4 steps per frame; stride: frames per RK4 step (used when ``substeps`` is 1: at high
+            frame rates one step spans ``stride`` frames and the frames between are cubic Hermite
+            interpolations of its ends).
         perturb: also the N_IN perturbations of each flight (else only the base).
+        integrated: the input columns whose perturbations are integrated (default: all); the position
+            columns (:data:`TRANSLATION`) are otherwise the base moved by their step, any other column left
+            out is taken to have no effect (e.g. the drag scale when it is not fitted).
     """
     S = len(inputs)
     V_ = 1 + N_IN if perturb else 1
-    inp = np.repeat(inputs[:, None, :], V_, axis=1)                     # (S, V_, N_IN)
+    cols = np.arange(N_IN) if integrated is None else np.asarray(integrated, int)
+    Vi = 1 + len(cols) if perturb else 1                                # variants integrated
+    inp = np.repeat(inputs[:, None, :], Vi, axis=1)                     # (S, Vi, N_IN)
     if perturb:
-        inp[:, 1:, :] += np.diag(EPS)[None]
+        inp[:, 1:, :] += np.diag(EPS)[cols][None]
     inp = inp.reshape(-1, N_IN)
-    f0 = np.repeat(F0, V_).astype(float)
-    sgn = np.repeat(direction, V_).astype(float)
+    f0 = np.repeat(F0, Vi).astype(float)
+    sgn = np.repeat(direction, Vi).astype(float)
     c = list(model.kernel())
     c[1] = c[1] * inp[:, 10]                                            # per-flight drag
     state = tuple(np.ascontiguousarray(inp[:, k]) for k in range(9))
     state = rk4_step(state, (f0 - inp[:, 9]) / fps, c)                  # from τ to the grid's first frame
-    h = sgn / (fps * substeps)
-    P = np.empty((L, 3, len(inp)))
-    Vv = np.empty((L, 3, len(inp)))
-    for j in range(L):
+    k = stride if substeps == 1 and stride > 1 else 1
+    h = sgn * k / (fps * substeps)
+    factors = spin_factors(h, c[5])
+    nodes = -(-(L - 1) // k) + 1                                        # steps cover frames 0 … L − 1
+    P = np.empty((nodes, 3, len(inp)))
+    Vv = np.empty((nodes, 3, len(inp)))
+    for j in range(nodes):
         P[j] = state[:3]
         Vv[j] = state[3:6]
-        if j < L - 1:
+        if j < nodes - 1:
             for _ in range(substeps):
-                state = rk4_step(state, h, c)
-    P = P.transpose(2, 0, 1).reshape(S, V_, L, 3)
-    Vv = Vv.transpose(2, 0, 1).reshape(S, V_, L, 3)
+                state = rk4_step(state, h, c, factors)
+    if k > 1:                                                           # frames between the steps
+        Pf, Vf = np.empty((L, 3, len(inp))), np.empty((L, 3, len(inp)))
+        m = len(range(0, L, k))
+        Pf[0::k], Vf[0::k] = P[:m], Vv[:m]
+        for q in range(1, k):                                           # frames q, q + k, … between nodes
+            m = len(range(q, L, k))
+            if m:
+                u = (np.arange(q, L, k) / k - np.arange(m))[:, None, None]
+                Pf[q::k], Vf[q::k] = hermite(P[:m], Vv[:m], P[1:m + 1], Vv[1:m + 1], u, h[None, None, :])
+        P, Vv = Pf, Vf
+    P = P.transpose(2, 0, 1).reshape(S, Vi, L, 3)
+    Vv = Vv.transpose(2, 0, 1).reshape(S, Vi, L, 3)
+    if Vi < V_:                                                         # the variants not integrated
+        P_, V2 = np.repeat(P[:, :1], V_, axis=1), np.repeat(Vv[:, :1], V_, axis=1)
+        P_[:, 1 + cols], V2[:, 1 + cols] = P[:, 1:], Vv[:, 1:]
+        for q in TRANSLATION:
+            if q not in cols:
+                P_[:, 1 + q, :, q] += EPS[q]
+        P, Vv = P_, V2
     end = np.zeros((S, V_, 3))
     vend = np.zeros((S, V_, 3))
     has = np.isfinite(tau_end)
@@ -304,14 +339,13 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
 # Residuals with a sparse Jacobian
 # ---------------------------------------------------------------------------------------------------
 class _Rows:
-    """Accumulates residual blocks and their sparse Jacobian entries."""
+    """Accumulates residual blocks and, lazily, their sparse Jacobian entries: the blocks are only evaluated
+    when :meth:`jacobian` is called (a rejected LM trial never pays for its Jacobian)."""
 
     def __init__(self, n: int, jac: bool):
         self.n, self.jac = n, jac
         self.r: list[np.ndarray] = []
-        self.I: list[np.ndarray] = []
-        self.Jc: list[np.ndarray] = []
-        self.Jv: list[np.ndarray] = []
+        self.pending: list[tuple[int, int, object]] = []
         self.m = 0
 
     def add(self, r: np.ndarray, blocks=None) -> None:
@@ -321,25 +355,32 @@ class _Rows:
         if not R:
             return
         if self.jac and blocks is not None:
-            rows = np.arange(self.m, self.m + R)
-            for cols, vals in blocks():
-                vals = np.asarray(vals, float).reshape(R, -1)
-                cols = np.broadcast_to(np.asarray(cols), vals.shape)
-                self.I.append(np.repeat(rows, vals.shape[1]))
-                self.Jc.append(cols.reshape(-1))
-                self.Jv.append(vals.reshape(-1))
+            self.pending.append((self.m, R, blocks))
         self.r.append(r)
         self.m += R
 
+    def residuals(self) -> np.ndarray:
+        return np.concatenate(self.r) if self.r else np.zeros(0)
+
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")
+    def jacobian(self) -> sparse.csr_matrix:
+        """(m, n) sparse Jacobian of every block added with ``blocks``."""
+        I, Jc, Jv = [], [], []
+        for m0, R, blocks in self.pending:
+            rows = np.arange(m0, m0 + R)
+            for cols, vals in blocks():
+                vals = np.asarray(vals, float).reshape(R, -1)
+                full = np.empty(vals.shape, np.int64)
+                full[...] = cols                                        # broadcast the column indices
+                I.append(np.repeat(rows, vals.shape[1]))
+                Jc.append(full.reshape(-1))
+                Jv.append(vals.reshape(-1))
+        if not I:
+            return sparse.csr_matrix((self.m, self.n))
+        return sparse.csr_matrix((np.concatenate(Jv), (np.concatenate(I), np.concatenate(Jc))), shape=(self.m, self.n))
+
     def result(self) -> tuple[np.ndarray, sparse.csr_matrix | None]:
-        r = np.concatenate(self.r) if self.r else np.zeros(0)
-        if not self.jac:
-            return r, None
-        if not self.I:
-            return r, sparse.csr_matrix((len(r), self.n))
-        J = sparse.csr_matrix((np.concatenate(self.Jv), (np.concatenate(self.I), np.concatenate(self.Jc))),
-                              shape=(len(r), self.n))
-        return r, J
+        return self.residuals(), (self.jacobian() if self.jac else None)
 
 
 def student_t(u: np.ndarray, dof: float) -> tuple[np.ndarray, np.ndarray]:
@@ -360,6 +401,9 @@ class Problem:
         self.obs, self.chain, self.cfg, self.model, self.hit_prior = obs, chain, cfg, model, hit_prior
         self.fps = obs.fps
         self.substeps = max(1, int(np.ceil(cfg.steps_per_second / obs.fps)))
+        self.stride = max(1, int(obs.fps // cfg.steps_per_second))     # frames per RK4 step at high frame rates
+        #: perturbations integrated: velocity, spin, τ and the drag scale when fitted (positions: translations)
+        self.integrated = tuple(range(3, 10)) + ((10,) if cfg.fit_drag else ())
         frames = np.arange(chain.first_frame, chain.last_frame + 1)
         seen = np.isfinite(obs.uv[frames]).all(axis=1)
         self.frames = frames[seen]
@@ -374,6 +418,7 @@ class Problem:
         self._wall_frames = [(w, w.normal, w.origin + r_ball * w.normal) for w in self._walls]
         self._layout_inputs()
         self.last_norm = np.zeros(len(self.frames))
+        self.norm_at: np.ndarray | None = None        # the θ of last_norm
         #: the impact model and the court's walls take part (off in the first pass: their hinges and the
         #: impact of a flight that is still far off send LM into poor minima)
         self.physics = True
@@ -450,19 +495,39 @@ class Problem:
         return F0, dirn, tau_end, int(max(need.max(), 2))
 
     def flights(self, theta: np.ndarray, perturb: bool) -> Flights:
-        F0, dirn, tau_end, L = self.grid(theta)
-        return integrate(self.inputs(theta), F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb)
+        return self.flights_batch([theta], perturb)[0]
+
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
+    def flights_batch(self, thetas: list[np.ndarray], perturb: bool) -> list[Flights]:
+        """The flights of several θ integrated in one batch (e.g. LM trials with different damping): each
+        θ's flights are the same as integrated alone, on a grid as long as the longest."""
+        grids = [self.grid(t) for t in thetas]
+        L = max(g[3] for g in grids)
+        F0, dirn, tau_end = (np.concatenate([g[i] for g in grids]) for i in range(3))
+        inputs = np.concatenate([self.inputs(t) for t in thetas])
+        fl = integrate(inputs, F0, dirn, L, tau_end, self.fps, self.model, self.substeps, perturb, self.stride,
+                       self.integrated)
+        S = len(self.chain.flights)
+        return [Flights(*(a[b * S:(b + 1) * S] for a in (fl.F0, fl.direction, fl.P, fl.V, fl.end, fl.vend)))
+                for b in range(len(thetas))]
 
     def index(self, fl: Flights, s: np.ndarray, frames: np.ndarray) -> np.ndarray:
         """Grid index of ``frames`` in flights ``s``."""
         return np.clip((frames - fl.F0[s]) * fl.direction[s], 0, fl.P.shape[2] - 1)
 
     # --- residuals -------------------------------------------------------------------------------
-    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
     def evaluate(self, theta: np.ndarray, jac: bool = True) -> tuple[np.ndarray, sparse.csr_matrix | None, dict]:
         """Residuals (m,), the sparse Jacobian (m, n) with ``jac``, and what the outputs need."""
+        rows, aux = self.assemble(theta, jac)
+        return (*rows.result(), aux)
+
+    @np.errstate(over="ignore", invalid="ignore", divide="ignore")  # a wild LM trial: rejected by its cost
+    def assemble(self, theta: np.ndarray, jac: bool = True, fl: Flights | None = None) -> tuple[_Rows, dict]:
+        """The residual rows at θ (their Jacobian is evaluated on demand, :meth:`_Rows.jacobian`) and what the
+        outputs need; sets ``last_norm``. ``fl``: θ's flights when already integrated (with perturbations
+        when ``jac``)."""
         ch, cfg = self.chain, self.cfg
-        fl = self.flights(theta, perturb=jac)
+        fl = fl if fl is not None else self.flights(theta, perturb=jac)
         taus = self.taus(theta)
         rows = _Rows(ch.n, jac)
         cols, M = self.cols, self.M
@@ -478,7 +543,7 @@ class Problem:
         pix = self.obs.camera.project(pts.reshape(-1, 3)).reshape(len(j), pts.shape[1], 2)
         r = (pix[:, 0] - self.uv) / cfg.pixel_sigma
         r = np.where(np.isfinite(r), r, 1e3)                                # behind the camera: far off
-        self.last_norm = np.linalg.norm(r, axis=1)
+        self.last_norm, self.norm_at = np.linalg.norm(r, axis=1), theta
         w = self.weights
 
         def reproj_blocks():
@@ -523,8 +588,7 @@ class Problem:
         if len(drag):
             rows.add((theta[drag] - 1.0) / cfg.drag_sigma,
                      lambda: [(drag[:, None], np.full((len(drag), 1), 1.0 / cfg.drag_sigma))])
-        r_all, J = rows.result()
-        return r_all, J, {"flights": fl, "owners": own, "taus": taus}
+        return rows, {"flights": fl, "owners": own, "taus": taus}
 
     def _incoming(self, theta: np.ndarray, fl: Flights, taus: np.ndarray, c: int):
         """The flight arriving at contact c: (flight index, v_in (3,), ω_in (3,), dv_in/dinputs (N_IN, 3) or
@@ -545,6 +609,7 @@ class Problem:
         """The impact model at floor/glass contacts with flights on both sides."""
         ch, cfg = self.chain, self.cfg
         r_ball = self.obs.court.ball.radius
+        todo = []
         for c, ct in enumerate(ch.contacts):
             if ct.material is None or ct.normal is None:
                 continue
@@ -552,16 +617,24 @@ class Problem:
             inc = self._incoming(theta, fl, taus, c)
             if not out or inc is None:
                 continue
-            so, (si, vin, win, dvin, decay) = out[0], inc
-            n = ct.normal
-            if vin @ n > -0.3:      # not moving into the surface: nothing to model
+            if inc[1] @ ct.normal > -0.3:      # not moving into the surface: nothing to model
                 continue
-            mat = ct.material
-            x0 = np.concatenate([vin, win])
-            X = np.repeat(x0[None], 7, axis=0)
-            X[1:4, :3] += np.eye(3) * 1e-4
-            X[4:7, 3:] += np.eye(3) * 1e-2
-            vo, wo = bounce(X[:, :3], X[:, 3:], n, mat.restitution, mat.friction, r_ball)
+            todo.append((ct, out[0], inc))
+        if not todo:
+            return
+        # the impact model of every contact and its 6 perturbations (v_in, ω_in) in one call
+        X = np.repeat(np.stack([np.concatenate([inc[1], inc[2]]) for _, _, inc in todo]), 7, axis=0)
+        X = X.reshape(len(todo), 7, 6)
+        X[:, 1:4, :3] += np.eye(3) * 1e-4
+        X[:, 4:7, 3:] += np.eye(3) * 1e-2
+        X = X.reshape(-1, 6)
+        rep = np.repeat(np.arange(len(todo)), 7)
+        VO, WO = bounce(X[:, :3], X[:, 3:], np.stack([ct.normal for ct, _, _ in todo])[rep],
+                        np.array([ct.material.restitution for ct, _, _ in todo])[rep],
+                        np.array([ct.material.friction for ct, _, _ in todo])[rep], r_ball)
+        for q, (ct, so, (si, vin, win, dvin, decay)) in enumerate(todo):
+            n = ct.normal
+            vo, wo = VO[7 * q:7 * q + 7], WO[7 * q:7 * q + 7]
             speed = float(np.linalg.norm(vin))
             vn = abs(float(vin @ n))
             s_n = cfg.bounce_sigma_normal * vn + cfg.bounce_sigma_floor
@@ -672,7 +745,7 @@ class Problem:
             if p[2] >= need:
                 continue
 
-            def blocks(s=s, k=k, fr=fr):
+            def blocks(s=s, k=k, fr=fr, P=P):
                 dz = ((1 - fr) * (fl.P[s, 1:, k, 2] - P[k, 2]) + fr * (fl.P[s, 1:, k + 1, 2] - fl.P[s, 0, k + 1, 2])) / EPS
                 return through(np.array([s]), -dz[None, :] / self.cfg.net_sigma)
 
@@ -715,7 +788,7 @@ class Problem:
         theta = theta.copy()
         prev = -np.inf
         for ct in ch.contacts:
-            t = np.clip(theta[ct.tau], ct.frame - cfg.tau_window, ct.frame + cfg.tau_window)
+            t = min(max(theta[ct.tau], ct.frame - cfg.tau_window), ct.frame + cfg.tau_window)
             t = max(t, prev + 0.5)
             theta[ct.tau] = t
             prev = t
@@ -725,7 +798,7 @@ class Problem:
             if ct.kind != "hit":
                 continue
             p = theta[ct.coords]
-            p[2] = np.clip(p[2], max(lo, r_ball), hi)
+            p[2] = min(max(p[2], max(lo, r_ball)), hi)
             h = ct.prior.hitter_xy
             if h is not None:
                 off = p[:2] - h
@@ -770,21 +843,32 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     sol = lm(problem, problem.clamp(theta), max_iter or cfg.max_iter)
     problem.physics = True
     n = sol.iterations
-    sol = lm(problem, sol.theta, max_iter or cfg.max_iter)
+    sol = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
     sol.iterations += n
     for _ in range(cfg.irls_passes - 1):
         problem.reweight()
         if np.all(problem.weights == 1.0):
             break
         n = sol.iterations
-        sol = lm(problem, sol.theta, cfg.reweighted_iter)
+        sol = lm(problem, sol.theta, cfg.reweighted_iter, sol.aux["flights"])
         sol.iterations += n
     return sol
 
 
-def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
+#: LM trials integrated together: the first batch (the usual damping and the next one up), then the rest
+LM_BATCHES = (2, 3, 3)
+
+
+def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | None = None) -> Solution:
+    """Levenberg-Marquardt from θ (``flights``: θ's flights when a previous pass integrated them). Up to 8
+    trials per iteration, the damping ×10 after each rejected one; trials are integrated in batches
+    (:data:`LM_BATCHES`, one pass of the integrator each) but judged in order, so the path is that of trying
+    them one at a time. A trial's Jacobian is assembled only when it is accepted; ``problem.last_norm`` is
+    left at the returned θ."""
     cfg = problem.cfg
-    r, J, aux = problem.evaluate(theta)
+    rows, aux = problem.assemble(theta, fl=flights)
+    r, J = rows.result()
+    norm = problem.last_norm
     cost = float(r @ r)
     lam = LM_LAMBDA0
     it = 0
@@ -794,25 +878,31 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
         g = J.T @ r
         D = np.maximum(np.diag(A), 1e-9)
         improved = False
-        for _ in range(8):
-            try:
-                step = -np.linalg.solve(A + lam * np.diag(D), g)
-            except np.linalg.LinAlgError:
+        for size in LM_BATCHES:
+            trials = []                                   # (damping, θ) of the next ``size`` attempts
+            for _ in range(size):
+                try:
+                    step = -np.linalg.solve(A + lam * np.diag(D), g)
+                    trials.append((lam, problem.clamp(theta + step)))
+                except np.linalg.LinAlgError:
+                    pass
                 lam *= LM_FACTOR
-                continue
-            cand = problem.clamp(theta + step)
-            r2, _, _ = problem.evaluate(cand, jac=False)
-            cost2 = float(r2 @ r2)
-            if np.isfinite(cost2) and cost2 < cost:
-                rel = (cost - cost2) / max(cost, 1e-12)
-                theta, cost = cand, cost2
-                r, J, aux = problem.evaluate(theta)
-                lam = max(lam / LM_FACTOR, 1e-9)
-                improved = True
+            flights = problem.flights_batch([c for _, c in trials], perturb=True) if trials else []
+            for (lam_c, cand), fl in zip(trials, flights):
+                rows, aux2 = problem.assemble(cand, fl=fl)
+                r2 = rows.residuals()
+                cost2 = float(r2 @ r2)
+                if np.isfinite(cost2) and cost2 < cost:
+                    rel = (cost - cost2) / max(cost, 1e-12)
+                    theta, cost, r, J, aux, norm = cand, cost2, r2, rows.jacobian(), aux2, problem.last_norm
+                    lam = max(lam_c / LM_FACTOR, 1e-9)
+                    improved = True
+                    break
+            if improved:
                 break
-            lam *= LM_FACTOR
         if not improved or rel < cfg.tolerance:
             break
+    problem.last_norm, problem.norm_at = norm, theta
     return Solution(theta, r, J, aux, it + 1)
 
 
