@@ -54,7 +54,7 @@ class CropConfig:
 
 def place_crop(expected_net: np.ndarray, grid: tuple[int, int], cfg: CropConfig) -> tuple[int, int] | None:
     """Top-left ``(y0, x0)`` of the crop that holds every expected position ``(K, 2)`` (network px, x y)
-    at least ``margin`` inside, on the ``align`` grid, within the ``grid (H, W)``; ``None`` if none does
+    at least ``margin`` inside its inner edges, on the ``align`` grid, within the ``grid (H, W)``; ``None`` if none does
     (the crop would not be smaller than the grid, or the positions spread too far)."""
     (h, w), (gh, gw) = cfg.size, grid
     if h > gh or w > gw or (h, w) == (gh, gw):
@@ -63,8 +63,9 @@ def place_crop(expected_net: np.ndarray, grid: tuple[int, int], cfg: CropConfig)
     centre = 0.5 * (lo + hi)
     x0 = int(np.clip(np.round((centre[0] - w / 2) / cfg.align) * cfg.align, 0, max(gw - w, 0)))
     y0 = int(np.clip(np.round((centre[1] - h / 2) / cfg.align) * cfg.align, 0, max(gh - h, 0)))
-    inside = (lo[0] >= x0 + cfg.margin and hi[0] <= x0 + w - cfg.margin
-              and lo[1] >= y0 + cfg.margin and hi[1] <= y0 + h - cfg.margin)
+    m = cfg.margin   # only at the crop's inner edges: where the crop ends, the grid ends too
+    inside = (lo[0] >= x0 + (m if x0 > 0 else 0) and hi[0] <= x0 + w - (m if x0 + w < gw else 0)
+              and lo[1] >= y0 + (m if y0 > 0 else 0) and hi[1] <= y0 + h - (m if y0 + h < gh else 0))
     return (y0, x0) if inside else None
 
 
