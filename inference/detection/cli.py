@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
 
     from inference.clipio import Clip, write_ball_csv
 
-    from .crop import CropConfig
+    from .crop import crop_config
     from .detect import SHIPPED_SPORT, BallDetectorRunner, shipped_weights
 
     clip = Clip(args.clip)
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"detector: weights {weights}")
     runner = BallDetectorRunner.from_weights(args.model, weights, trust=args.trust_checkpoint,
                                              step=args.step, batch_size=args.batch_size, backend=args.backend,
-                                             crop=CropConfig() if args.crop == "auto" else None)
+                                             crop=crop_config(args.crop))
     result = runner.run(clip, progress=True)
     path = write_ball_csv(args.out or clip.ball_path, result.track)
     seen = int(np.sum(result.track.visibility == 1))

@@ -52,6 +52,13 @@ class CropConfig:
             raise ValueError(f"crop margin {self.margin} / border {self.border} leave nothing of {self.size}")
 
 
+def crop_config(mode: str) -> CropConfig | None:
+    """The crop-tracking of ``--crop`` ``auto`` (the default :class:`CropConfig`) or ``off`` (None)."""
+    if mode not in CROP_MODES:
+        raise ValueError(f"crop must be one of {CROP_MODES}, got {mode!r}")
+    return CropConfig() if mode == "auto" else None
+
+
 def place_crop(expected_net: np.ndarray, grid: tuple[int, int], cfg: CropConfig) -> tuple[int, int] | None:
     """Top-left ``(y0, x0)`` of the crop that holds every expected position ``(K, 2)`` (network px, x y)
     at least ``margin`` inside its inner edges, on the ``align`` grid, within the ``grid (H, W)``; ``None`` if none does

@@ -101,3 +101,30 @@ def test_place_crop_keeps_the_expected_ball_inside_on_the_stride_grid():
     assert place_crop(np.array([[50.0, 50.0]]), (144, 256), cfg) is None        # crop not smaller than grid
     with pytest.raises(ValueError, match="multiples of 8"):
         CropConfig(size=(100, 256))
+
+
+def test_crop_flags_reach_the_runner_from_detect_and_infer():
+    """`--crop`/`--detector-crop` and `--detector-backend` are parsed into the runner's settings."""
+    import argparse
+
+    from inference.detection.cli import register as register_detect
+    from inference.detection.crop import crop_config
+    from inference.pipeline.cli import _config
+    from inference.pipeline.cli import register as register_infer
+
+    assert crop_config("auto") == CropConfig() and crop_config("off") is None
+    with pytest.raises(ValueError, match="crop must be one of"):
+        crop_config("on")
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command")
+    register_detect(sub)
+    register_infer(sub)
+    args = parser.parse_args(["detect", "clip"])
+    assert (args.crop, args.backend) == ("auto", "torch")   # crop-tracking is the default
+    args = parser.parse_args(["detect", "clip", "--crop", "off", "--backend", "onnx"])
+    assert (args.crop, args.backend) == ("off", "onnx")
+    cfg = _config(parser.parse_args(["infer", "v.mp4", "--detector-crop", "off", "--detector-backend", "onnx"]))
+    assert (cfg.detector_crop, cfg.detector_backend) == ("off", "onnx")
+    assert _config(parser.parse_args(["infer", "v.mp4"])).detector_crop == "auto"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["detect", "clip", "--backend", "tensorrt"])
