@@ -11,7 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "detect",
         help="detect and track the ball of a clip with a detector network (writes ball.csv)",
         description="Streams the clip's frames through TrackNetV2, MonoTrack or WASB at full resolution "
-        "(288×512 letterbox), turns heatmaps into candidates and tracks the ball (motion model, static-ball "
+        "(288×512 letterbox; with --crop auto a quarter-size window around the tracked ball), turns heatmaps into candidates and tracks the ball (motion model, static-ball "
         "and reflection rejection). Default: WASB with the shipped padel weights (the only shipped ball "
         "detector: a tennis clip gets them too, and the command says so).",
     )
