@@ -21,7 +21,7 @@ help:
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --disable-pip-version-check torch==2.13.0
-	$(PIP) install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+	$(PIP) install -q --disable-pip-version-check -c constraints.txt -e '.[dev,onnx]'
 	$(PIP) install -q --disable-pip-version-check --no-deps trackers==2.6.1
 	$(PY) -m inference.players.movenet_fetch
 	$(PY) -c "import torch, cv2; assert torch.__version__.startswith('2.13.0'), torch.__version__"

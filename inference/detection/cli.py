@@ -11,7 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "detect",
         help="detect and track the ball of a clip with a detector network (writes ball.csv)",
         description="Streams the clip's frames through TrackNetV2, MonoTrack or WASB at full resolution "
-        "(288×512 letterbox), turns heatmaps into candidates and tracks the ball (motion model, static-ball "
+        "(288×512 letterbox; with --crop auto a quarter-size window around the tracked ball), turns heatmaps into candidates and tracks the ball (motion model, static-ball "
         "and reflection rejection). Default: WASB with the shipped padel weights (the only shipped ball "
         "detector: a tennis clip gets them too, and the command says so).",
     )
@@ -26,6 +26,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--step", type=int, default=3, help="window step in frames (3: non-overlapping, 1: pooled)")
     p.add_argument("--batch-size", type=int, default=1,
                    help="windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
+    p.add_argument("--backend", choices=["torch", "onnx"], default="torch",
+                   help="torch: eager PyTorch (default); onnx: ONNX Runtime on the CPU (pip install "
+                   "'rally3d[onnx]'), the checkpoint exported once and cached in $RALLY3D_CACHE/onnx")
+    p.add_argument("--crop", choices=["auto", "off"], default="auto",
+                   help="auto (default): the full frame only to find the ball, then a quarter-size window "
+                   "around where the tracker expects it; off: the full frame everywhere")
     p.add_argument("--out", type=Path, help="write here instead of the clip's ball.csv")
     p.set_defaults(func=run)
 
@@ -35,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
 
     from inference.clipio import Clip, write_ball_csv
 
+    from .crop import crop_config
     from .detect import SHIPPED_SPORT, BallDetectorRunner, shipped_weights
 
     clip = Clip(args.clip)
@@ -47,10 +54,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"detector: weights {weights}")
     runner = BallDetectorRunner.from_weights(args.model, weights, trust=args.trust_checkpoint,
-                                             step=args.step, batch_size=args.batch_size)
+                                             step=args.step, batch_size=args.batch_size, backend=args.backend,
+                                             crop=crop_config(args.crop))
     result = runner.run(clip, progress=True)
     path = write_ball_csv(args.out or clip.ball_path, result.track)
     seen = int(np.sum(result.track.visibility == 1))
     print(f"{clip.root.name}: ball detected in {seen} of {result.n_frames} frames, {result.fps:.1f} frames/s "
-          f"(network {result.n_frames / max(result.seconds_network, 1e-9):.1f} frames/s); wrote {path}")
+          f"(network {result.n_frames / max(result.seconds_network, 1e-9):.1f} frames/s, {args.backend}; windows: "
+          f"{_windows(result.windows)}); wrote {path}")
     return 0
+
+
+def _windows(counts: dict[str, int]) -> str:
+    """``12 full, 40 crop (3 re-run on the full frame)``."""
+    text = f"{counts.get('full', 0)} full"
+    if counts.get("crop"):
+        text += f", {counts['crop']} crop ({counts.get('crop_rerun', 0)} re-run on the full frame)"
+    return text

@@ -1,5 +1,7 @@
 """Ball detection on a whole clip: stream frames → letterbox → batched N-frame windows through the
-network at full resolution → heatmap candidates in original pixels → online tracker → ball.csv rows.
+network at full resolution (or, with crop-tracking, a small window around the expected ball:
+:mod:`.crop`) → heatmap candidates in original pixels → tracker → ball.csv rows. The network runs in
+eager PyTorch or ONNX Runtime (:mod:`.engine`).
 
 The video is streamed (never held in memory); windows are non-overlapping (``step = frames_out``) as in
 WASB-SBDT, or overlapping with candidates pooled per frame (``step = 1``).
@@ -11,6 +13,7 @@ Example:
 """
 from __future__ import annotations
 
+import copy
 import logging
 import time
 from collections import deque
@@ -25,10 +28,12 @@ from inference.masks import apply_mask, clip_mask
 from inference.models.checkpoint import load_detector
 from inference.models.fuse import fold_batchnorm
 
+from .crop import CropConfig, crop_candidates, place_crop
+from .engine import make_engine
 from .geometry import Letterbox
-from .preprocess import normalize
 from .postprocess import FrameCandidates, PostprocessConfig, heatmaps_to_candidates, pool_candidates
-from .tracker import TrackerConfig, TrackResult, track_candidates
+from .preprocess import normalize
+from .tracker import BallTracker, TrackerConfig, TrackResult, track_candidates
 
 log = logging.getLogger(__name__)
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
@@ -56,7 +61,11 @@ def shipped_weights(model: str, sport: str | None) -> tuple[Path | None, str]:
 
 @dataclass
 class DetectionResult:
-    """Per-frame candidates, the tracked ball and timing of one clip."""
+    """Per-frame candidates, the tracked ball and timing of one clip.
+
+    ``windows``: how many detector windows ran on the full frame (``full``), on a crop (``crop``), and
+    crops whose answer was not trusted and were re-run on the full frame (``crop_rerun``).
+    """
 
     candidates: list[FrameCandidates]
     tracked: TrackResult
@@ -65,6 +74,7 @@ class DetectionResult:
     seconds_total: float
     n_frames: int
     truncated: str | None = None  # why decoding stopped before the video's reported end, if it did
+    windows: dict[str, int] = field(default_factory=dict)
 
     @property
     def fps(self) -> float:
@@ -79,7 +89,11 @@ class BallDetectorRunner:
         model: maps (B, 3·F, H, W) to (B, F, H, W) logits.
         frames_in: F; net_size: (H, W); normalize: ``imagenet`` or ``unit``.
         step: window step in frames (``frames_in``: non-overlapping; 1: pooled overlapping windows).
-        batch_size: windows per forward pass.
+        batch_size: windows per forward pass (full-frame windows; crop-tracking runs one at a time).
+        backend: ``torch`` (eager PyTorch) or ``onnx`` (ONNX Runtime, CPU; exported and cached on first use,
+            :mod:`.engine`).
+        crop: :class:`~.crop.CropConfig` for crop-tracking, ``None`` for the full frame everywhere.
+        fold_bn: fold batch norms into the convolutions (an inference copy of ``model``).
     """
 
     model: torch.nn.Module
@@ -91,12 +105,19 @@ class BallDetectorRunner:
     postprocess: PostprocessConfig = field(default_factory=PostprocessConfig)
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     device: str = "cpu"
+    backend: str = "torch"
+    crop: CropConfig | None = None
+    fold_bn: bool = True
+    onnx_dir: Path | None = None
 
     def __post_init__(self) -> None:
         # batch-norm folded into the convolutions and channels-last memory: ~1.3x and ~1.2-2x faster for these
         # convnets on a CPU (bench/bench_detectors.py); the runner's model is a folded copy, never trained
-        self.model, _ = fold_batchnorm(self.model)
-        self.model = self.model.to(self.device, memory_format=torch.channels_last)
+        if self.fold_bn:
+            self.model, _ = fold_batchnorm(self.model)
+        else:
+            self.model = copy.deepcopy(self.model).eval()
+        self.engine = make_engine(self.model, self.backend, self.frames_in, self.device, self.onnx_dir)
 
     @classmethod
     def from_weights(cls, name: str | None = "wasb", weights: str | Path | None = None, *, trust: bool = False,
@@ -115,42 +136,129 @@ class BallDetectorRunner:
             log.info("%s holds a %s detector (stored in the file), not %s: using %s", weights, spec.arch, name, spec.arch)
         return cls(model, frames_in=spec.frames_in, net_size=spec.input_size, normalize=spec.normalize, **kw)
 
-    def _tensor(self, frames: list[np.ndarray]) -> torch.Tensor:
-        return torch.from_numpy(normalize(np.stack(frames), self.normalize))
+    def _forward(self, windows: list[list[np.ndarray]]) -> tuple[np.ndarray, float]:
+        """Probabilities ``(B, F_out, h, w)`` of ``B`` windows of ``F`` frames ``(h, w, 3)``, and the seconds."""
+        t0 = time.perf_counter()
+        x = np.stack([normalize(np.stack(w), self.normalize) for w in windows])
+        probs = self.engine(x)
+        return probs, time.perf_counter() - t0
 
-    def heatmaps(self, frames) -> tuple[dict[int, list[np.ndarray]], float]:
-        """Run the network over letterboxed frames; frame index → its probability maps (one per window)."""
-        maps: dict[int, list[np.ndarray]] = {}
+    def _windows(self, frames):
+        """``(start, frames)`` of each detector window over the frame stream."""
         window: deque = deque(maxlen=self.frames_in)
-        batch, starts = [], []
-        seconds = 0.0
-
-        def flush():
-            nonlocal seconds
-            t0 = time.perf_counter()
-            with torch.inference_mode():
-                x = torch.stack(batch).to(self.device).contiguous(memory_format=torch.channels_last)
-                probs = torch.sigmoid(self.model(x)).float().cpu().numpy()
-            seconds += time.perf_counter() - t0
-            for s, p in zip(starts, probs):
-                for k in range(p.shape[0]):
-                    maps.setdefault(s + self.frames_in - p.shape[0] + k, []).append(p[k])
-            batch.clear()
-            starts.clear()
-
         last_start = -self.step
         for i, frame in enumerate(frames):
             window.append(frame)
             start = i - self.frames_in + 1
             if len(window) == self.frames_in and start - last_start >= self.step:
-                batch.append(self._tensor(list(window)))
-                starts.append(start)
                 last_start = start
-                if len(batch) == self.batch_size:
-                    flush()
+                yield start, list(window)
+
+    def heatmaps(self, frames) -> tuple[dict[int, list[np.ndarray]], float]:
+        """Run the network over letterboxed frames (full grid); frame index → its probability maps (one per
+        window), and the network seconds."""
+        maps: dict[int, list[np.ndarray]] = {}
+        seconds = 0.0
+        batch: list[tuple[int, list[np.ndarray]]] = []
+
+        def flush():
+            nonlocal seconds
+            probs, dt = self._forward([w for _, w in batch])
+            seconds += dt
+            for (s, _), p in zip(batch, probs):
+                for k in range(p.shape[0]):
+                    maps.setdefault(s + self.frames_in - p.shape[0] + k, []).append(p[k])
+            batch.clear()
+
+        for item in self._windows(frames):
+            batch.append(item)
+            if len(batch) == self.batch_size:
+                flush()
         if batch:
             flush()
         return maps, seconds
+
+    def candidates(self, frames, lb: Letterbox, fps: float) -> tuple[list[FrameCandidates], float, dict[str, int]]:
+        """Per-frame candidates (original pixels) of letterboxed ``frames``, the network seconds and the window
+        counts (see :class:`DetectionResult`). Frames' candidates are made as soon as their last window has
+        run, so no heatmap outlives its window; with ``crop`` an online tracker places the crops."""
+        done: list[FrameCandidates] = []
+        pending: dict[int, list[FrameCandidates]] = {}
+        counts = {"full": 0, "crop": 0, "crop_rerun": 0}
+        seconds = 0.0
+        online = None if self.crop is None else BallTracker(fps, self.tracker, (lb.src_w, lb.src_h))
+        full_every = None if self.crop is None else self.tracker.frames(self.crop.full_every_s, fps)
+        last_full = -(10 ** 9)
+
+        def finish(upto: int) -> None:   # frames < upto have all their windows: pool, feed the online tracker
+            while len(done) < upto:
+                parts = pending.pop(len(done), [])
+                fc = pool_candidates(parts) if parts else FrameCandidates.empty()
+                done.append(fc)
+                if online is not None:
+                    online.update(fc.xy, fc.score)
+
+        def add(starts: list[int], probs: np.ndarray, origin=None) -> bool:
+            found = True
+            for s, p in zip(starts, probs):
+                first = s + self.frames_in - p.shape[0]
+                if origin is None:
+                    cands = heatmaps_to_candidates(p, lb, self.postprocess)
+                else:
+                    raw = heatmaps_to_candidates(p, None, self.postprocess)
+                    cands, found = crop_candidates(raw, origin, p.shape[2] / self.crop.size[1], lb, self.crop)
+                    if not found:
+                        return False
+                for k, c in enumerate(cands):
+                    pending.setdefault(first + k, []).append(c)
+            return found
+
+        batch: list[tuple[int, list[np.ndarray]]] = []
+        for start, window in self._windows(frames):
+            if online is None:   # full frames, batched
+                batch.append((start, window))
+                if len(batch) == self.batch_size:
+                    probs, dt = self._forward([w for _, w in batch])
+                    seconds += dt
+                    add([s for s, _ in batch], probs)
+                    counts["full"] += len(batch)
+                    finish(batch[-1][0] + self.step)
+                    batch.clear()
+                continue
+            finish(start)
+            origin = None
+            if start - last_full < full_every:
+                origin = self._place_crop(online, lb, start)
+            if origin is not None:
+                (y0, x0), (h, w) = origin, self.crop.size
+                probs, dt = self._forward([[f[y0:y0 + h, x0:x0 + w] for f in window]])
+                seconds += dt
+                counts["crop"] += 1
+                if add([start], probs, origin):
+                    finish(start + self.step)
+                    continue
+                counts["crop_rerun"] += 1
+            probs, dt = self._forward([window])
+            seconds += dt
+            counts["full"] += 1
+            last_full = start
+            add([start], probs)
+            finish(start + self.step)
+        if batch:
+            probs, dt = self._forward([w for _, w in batch])
+            seconds += dt
+            add([s for s, _ in batch], probs)
+            counts["full"] += len(batch)
+        finish(max(pending, default=-1) + 1)
+        return done, seconds, counts
+
+    def _place_crop(self, online: BallTracker, lb: Letterbox, start: int) -> tuple[int, int] | None:
+        """The crop origin for the window of frames ``start..start+F-1``, or None (full frame)."""
+        last = online.frame - 1
+        expected = online.expected(np.arange(start, start + self.frames_in) - last)
+        if expected is None or expected[1] < self.crop.min_score:
+            return None
+        return place_crop(lb.forward(expected[0]), self.net_size, self.crop)
 
     def run(self, clip: Clip, progress: bool = False, tolerate_truncation: bool = False,
             active: np.ndarray | None = None) -> DetectionResult:
@@ -170,10 +278,11 @@ class BallDetectorRunner:
         lb = Letterbox(info.width, info.height, self.net_size[1], self.net_size[0])
         truncated: list[str] = []
         rects = clip_mask(clip)
-        maps: dict[int, list[np.ndarray]] = {}
         seconds_net = 0.0
+        windows = {"full": 0, "crop": 0, "crop_rerun": 0}
         with clip.frames(cache_size=0) as src:
             n = len(src)
+            candidates = [FrameCandidates.empty() for _ in range(n)]
             runs = [(0, n)] if active is None else segments(np.asarray(active, bool)[:n])
             bar = tqdm(total=sum(b - a for a, b in runs), desc=f"detect {clip.root.name}", unit="frame",
                        disable=not progress)
@@ -195,14 +304,13 @@ class BallDetectorRunner:
             for start, stop in runs:
                 if truncated or start >= n:
                     break
-                run_maps, seconds = self.heatmaps(decoded(start, stop))
-                maps.update({start + k: v for k, v in run_maps.items()})
+                run_cands, seconds, run_windows = self.candidates(decoded(start, stop), lb, info.fps)
+                k = min(len(run_cands), stop - start)
+                candidates[start:start + k] = run_cands[:k]
                 seconds_net += seconds
+                windows = {k: windows.get(k, 0) + v for k, v in run_windows.items()}
             bar.close()
-        candidates = []
-        for i in range(n):
-            per_window = [heatmaps_to_candidates(m[None], lb, self.postprocess)[0] for m in maps.get(i, [])]
-            candidates.append(pool_candidates(per_window) if per_window else FrameCandidates.empty())
+        candidates = candidates[:n]
         tracked = TrackResult.empty(n)
         for start, stop in runs:  # a track never crosses a cut
             stop = min(stop, n)
@@ -214,4 +322,4 @@ class BallDetectorRunner:
             tracked.score[start:stop], tracked.track_id[start:stop] = part.score, ids
         track = tracked.to_ball_track(info.width, info.height)
         return DetectionResult(candidates, tracked, track, seconds_net, time.perf_counter() - t0, n,
-                               truncated[0] if truncated else None)
+                               truncated[0] if truncated else None, windows)

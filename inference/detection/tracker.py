@@ -161,6 +161,7 @@ class ConstantAcceleration:
     """
 
     def __init__(self, dt: float, jerk_std: float, meas_std: float) -> None:
+        self.dt = dt
         self.F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
         g = np.array([dt ** 3 / 6.0, dt * dt / 2.0, dt])
         self.Q = np.outer(g, g) * jerk_std ** 2
@@ -183,6 +184,11 @@ class ConstantAcceleration:
     def position(self) -> np.ndarray:
         """``(2,)`` current position estimate."""
         return self.x[0].copy()
+
+    def extrapolate(self, steps) -> np.ndarray:
+        """Positions ``(K, 2)`` ``steps (K,)`` frames after the current state (which is left unchanged)."""
+        t = np.asarray(steps, np.float64)[:, None] * self.dt
+        return self.x[0] + self.x[1] * t + 0.5 * self.x[2] * t * t
 
     def mahalanobis2(self, z: np.ndarray) -> np.ndarray:
         """Squared Mahalanobis distances ``(K,)`` of measurements ``z (K, 2)`` to the prediction."""
@@ -430,6 +436,15 @@ class BallTracker:
         self.flagged = static | reflection
         self.frame += 1
         return estimate
+
+    def expected(self, steps) -> tuple[np.ndarray, float] | None:
+        """Where the ball track expects the ball ``steps (K,)`` frames after the last frame fed to
+        :meth:`update` (``(K, 2)`` px), with its last detection's score; ``None`` without a ball track or
+        while it coasts (crop-tracking then runs the full frame)."""
+        track = self.main
+        if track is None or track.misses > 0:
+            return None
+        return track.filter.extrapolate(steps), float(track.scores[-1])
 
     def _pairs(self, xy: np.ndarray) -> np.ndarray:
         c = self.cfg

@@ -33,6 +33,8 @@ BLOCKS_PER_BRANCH = 2
 class BasicBlock(nn.Module):
     """Two 3×3 conv-BN with an identity shortcut: ``(B, C, H, W) -> (B, C, H, W)``."""
 
+    conv_bn_pairs = (("conv1", "bn1"), ("conv2", "bn2"))  # folded for inference (models/fuse.py)
+
     def __init__(self, channels: int):
         super().__init__()
         self.conv1 = nn.Conv2d(channels, channels, 3, padding=1, bias=False)
@@ -52,6 +54,7 @@ class Bottleneck(nn.Module):
     ``(B, C_in, H, W) -> (B, 4·planes, H, W)``."""
 
     expansion = 4
+    conv_bn_pairs = (("conv1", "bn1"), ("conv2", "bn2"), ("conv3", "bn3"))
 
     def __init__(self, in_channels: int, planes: int):
         super().__init__()
@@ -155,6 +158,8 @@ class WASB(nn.Module):
     8 (default 288×512). Output ``(B, frames_out, H, W)`` logits: apply a sigmoid for heatmaps.
     1,481,427 parameters for the default 3 in / 3 out.
     """
+
+    conv_bn_pairs = (("conv1", "bn1"), ("conv2", "bn2"))  # the stem
 
     def __init__(self, frames_in: int = 3, frames_out: int = 3):
         super().__init__()

@@ -48,6 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int, default=1,
                    help="detector windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
     p.add_argument("--step", type=int, default=3, help="detector window step in frames (default 3)")
+    p.add_argument("--detector-backend", choices=["torch", "onnx"], default="torch",
+                   help="run the detector in eager PyTorch (default) or ONNX Runtime on the CPU (rally3d[onnx])")
+    p.add_argument("--detector-crop", choices=["auto", "off"], default="auto",
+                   help="auto (default): the full frame only to find the ball, then a window around it; off")
     p.add_argument("--device", default="cpu", help="cpu or cuda (single clip)")
     p.add_argument("--only", help=f"comma-separated stages to run ({', '.join(STAGE_NAMES)}); the others are reused")
     p.add_argument("--overwrite", action="store_true", help="replace files the pipeline did not write (backed up)")
@@ -66,6 +70,7 @@ def _config(args: argparse.Namespace):
 
     return PipelineConfig(detector=args.detector_model, detector_weights=args.detector,
                           trust_checkpoint=args.trust_checkpoint, step=args.step,
+                          detector_backend=args.detector_backend, detector_crop=args.detector_crop,
                           batch_size=args.batch_size, events=args.events, rally_only=args.rally_only, pose=args.pose,
                           pose_model=args.pose_model, method=args.method, device=args.device,
                           overwrite=args.overwrite, progress=not args.no_progress,

@@ -37,6 +37,7 @@ class PipelineConfig:
         detector: ``wasb``, ``tracknetv2`` or ``monotrack``; detector_weights: checkpoint (None: shipped).
         trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
+        detector_backend: ``torch`` or ``onnx`` (ONNX Runtime); detector_crop: crop-tracking ``auto`` or ``off``.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
         rally_only: leave the events judged outside the point (warm-up bounces, the ball after it) out of
             events.csv (rally.yaml lists them either way).
@@ -54,6 +55,8 @@ class PipelineConfig:
     trust_checkpoint: bool = False
     step: int = 3
     batch_size: int = 1
+    detector_backend: str = "torch"
+    detector_crop: str = "auto"
     events: Path | None = None
     rally_only: bool = False
     pose: str = "auto"
@@ -67,6 +70,9 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         if self.step < 1 or self.batch_size < 1:
             raise ValueError(f"step and batch_size must be ≥ 1, got {self.step}, {self.batch_size}")
+        if self.detector_backend not in ("torch", "onnx") or self.detector_crop not in ("auto", "off"):
+            raise ValueError(f"detector_backend must be torch or onnx and detector_crop auto or off, got "
+                             f"{self.detector_backend!r}, {self.detector_crop!r}")
 
 
 @dataclass
@@ -222,11 +228,13 @@ def _weights_path(ctx: Context) -> Path:
 
 def _detect_run(ctx: Context) -> Outcome:
     from inference.clipio import write_ball_csv
+    from inference.detection.crop import crop_config
     from inference.detection.detect import BallDetectorRunner
 
     runner = BallDetectorRunner.from_weights(ctx.cfg.detector, _weights_path(ctx), trust=ctx.cfg.trust_checkpoint,
-                                             step=ctx.cfg.step,
-                                             batch_size=ctx.cfg.batch_size, device=ctx.cfg.device)
+                                             step=ctx.cfg.step, batch_size=ctx.cfg.batch_size, device=ctx.cfg.device,
+                                             backend=ctx.cfg.detector_backend,
+                                             crop=crop_config(ctx.cfg.detector_crop))
     active = _court_frames(ctx)
     result = runner.run(ctx.clip, progress=ctx.cfg.progress, tolerate_truncation=True, active=active)
     ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
-from torch import nn
+from detection_helpers import YellowNet, render_clip
 
 from inference.cli import main
 from inference.clipio import Clip
@@ -15,42 +14,12 @@ from inference.models.checkpoint import save_wasb_checkpoint
 from inference.models.registry import build_model
 
 
-class YellowNet(nn.Module):
-    """Logits that are high where a frame is ball-coloured (R + G - 2B large), one map per input frame."""
-
-    def __init__(self, frames: int = 3):
-        super().__init__()
-        self.conv = nn.Conv2d(3 * frames, frames, 1)
-        w = torch.zeros(frames, 3 * frames, 1, 1)
-        for k in range(frames):
-            w[k, 3 * k:3 * k + 3, 0, 0] = torch.tensor([1.0, 1.0, -2.0]) * 25
-        self.conv.weight.data = w
-        self.conv.bias.data.fill_(-25 * 0.75)
-
-    def forward(self, x):
-        return self.conv(x)
-
-
 @pytest.fixture(scope="module")
 def clip(tmp_path_factory):
     """A 640×360 clip: a yellow ball on a parabola, a still yellow ball on the floor, a dark court."""
-    import cv2
-
-    from inference.clipio import BallTrack, ClipInfo, write_video
-
-    out = tmp_path_factory.mktemp("det") / "clip"
-    clip = Clip.create(out, ClipInfo(sport="padel", fps=30.0, width=640, height=360, video="video.mp4", n_frames=60))
     t = np.arange(60) / 30.0
     xy = np.stack([80 + 250 * t, 300 - 400 * t + 200 * t**2], axis=1)    # stays in the frame
-    frames = []
-    for p in xy:
-        img = np.full((360, 640, 3), (40, 70, 140), np.uint8)
-        cv2.circle(img, (500, 320), 5, (215, 232, 62), -1, cv2.LINE_AA)     # a still ball
-        cv2.circle(img, tuple(np.round(p).astype(int)), 5, (215, 232, 62), -1, cv2.LINE_AA)
-        frames.append(img)
-    write_video(clip.video_path, frames, 30.0)
-    clip.write_ball(BallTrack(np.arange(60), np.ones(60, np.int8), xy / [640, 360]))
-    return clip
+    return render_clip(tmp_path_factory.mktemp("det") / "clip", xy)
 
 
 def test_pipeline_finds_the_rendered_ball(clip):

@@ -26,6 +26,8 @@ def test_folded_model_gives_the_same_logits(name):
     assert sum(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules()) == n_bn - n
     if name != "tracknetv2":  # TrackNetV2 is conv → ReLU → BN: nothing to fold
         assert n > 0
+    if name in ("wasb", "monotrack"):  # every BN follows its convolution: all folded (named pairs too)
+        assert n == n_bn
     x = torch.randn(1, 9, 96, 160)
     with torch.inference_mode():
         ref, out = model(x), folded(x)
