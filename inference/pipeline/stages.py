@@ -385,7 +385,8 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     fit.save(clip)
     ok = sum(s.ok for s in fit.segments)
     if ok == 0:
-        reasons = "; ".join(sorted({s.reason for s in fit.segments if not s.ok}))
+        reasons = "; ".join(sorted({s.reason for s in fit.segments if not s.ok})) or \
+            "no event in any court-view shot of shots.json"
         raise StageError(f"{clip.root}: no flight could be reconstructed ({reasons}) — check ball.csv and events.csv")
     # flights that cannot be fitted (too few detections between two events) are normal in a real rally: they
     # are listed in segments.json with their reason, and the run still counts as complete

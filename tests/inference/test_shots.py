@@ -212,3 +212,21 @@ def test_one_shot_clip_reconstructs_as_without_shots(tmp_path, spliced):
         out[name] = ([{k: v for k, v in s.items()} for s in seg["segments"]], "shots" in seg, clip.read_ball_3d())
     assert out["none"][0] == out["one"][0] and not out["one"][1]
     assert out["none"][2] == out["one"][2]
+
+
+def test_shot_frames_and_rows_renumber_a_shot_from_zero(spliced):
+    """What a crop event model and the per-shot stages read of shot 120–159: its own frames and rows from 0."""
+    from inference.pipeline.per_shot import ShotFrames
+    from inference.shots import shot_rows
+
+    with spliced.frames(cache_size=0) as src:
+        shot = ShotFrames(src, 120, 160)
+        frames = list(shot.iter(0, 100))
+        assert len(shot) == len(frames) == 40
+        assert np.array_equal(frames[5], src.read(125)) and np.array_equal(shot.read(39), src.read(159))
+    ball = spliced.read_ball()
+    rows = shot_rows(ball, 120, 160)
+    assert rows.frame.tolist() == list(range(40))
+    assert np.array_equal(rows.xy, ball.xy[(ball.frame >= 120) & (ball.frame < 160)], equal_nan=True)
+    ev = shot_rows(spliced.read_events(), 120, 160)
+    assert ev.frame.tolist() == [14, 27] and list(ev.event) == ["ground", "player_far"]
