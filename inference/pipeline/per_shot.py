@@ -118,6 +118,8 @@ def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frame
                                       end=s.segment.end + a)
             segs.append(dataclasses.replace(s, segment=seg, frames=s.frames + a))
         entry.update(flights=len(fit.segments), reconstructed=sum(s.ok for s in fit.segments))
+        if not fit.segments:
+            entry["reason"] = f"{int(m.sum())} event(s) in this shot: no flight between two events"
         seconds += fit.seconds
         cpu += fit.cpu_seconds or 0.0
         iterations += fit.extra.get("iterations", [])
