@@ -15,7 +15,9 @@
 
 A clip with one shot is a court view whatever the scores say (the user chose it). ``rally3d infer``
 writes the result as ``shots.json`` (docs/formats.md) and runs the ball detector on court-view frames only;
-the other frames are reported as unseen (visibility 0).
+the other frames are reported as unseen (visibility 0). The hit-event model and the 3D fit then run on
+each court-view shot on its own (:mod:`inference.pipeline.per_shot`): no event window, no flight joins frames
+across a cut.
 
 Example:
     >>> report = find_shots(clip, camera, court)
@@ -77,6 +79,11 @@ class ShotReport:
         for s in self.shots:
             out[s.start:s.stop] = s.court_view
         return out
+
+    def court_spans(self) -> list[tuple[int, int]]:
+        """``[(start, stop), ...]`` of the court-view shots, in order; two court views either side of a cut
+        stay apart (the time across a cut is not continuous)."""
+        return [(s.start, s.stop) for s in self.shots if s.court_view]
 
     def summary(self) -> str:
         court = [s for s in self.shots if s.court_view]
@@ -212,6 +219,24 @@ def _by_similarity(thumbs: np.ndarray, spans) -> list[Shot]:
         diff = float(np.abs(m - means[main]).mean())
         shots.append(Shot(a, b, diff <= SIMILAR_MAX, round(diff, 3), "similarity"))
     return shots
+
+
+def shot_rows(table, start: int, stop: int):
+    """The rows of a frame-indexed table (``BallTrack``, ``HitEvents``, ``PlayerTracks``) with
+    ``start <= frame < stop``, frames renumbered from 0 (a shot as a clip of its own)."""
+    import dataclasses
+
+    keep = (table.frame >= start) & (table.frame < stop)
+    values = {}
+    for f in dataclasses.fields(table):
+        v = getattr(table, f.name)
+        if isinstance(v, dict):
+            v = {k: np.asarray(x)[keep] for k, x in v.items()}
+        elif isinstance(v, np.ndarray) and len(v) == len(keep):
+            v = v[keep]
+        values[f.name] = v
+    values["frame"] = values["frame"] - start
+    return type(table)(**values)
 
 
 def segments(active: np.ndarray) -> list[tuple[int, int]]:

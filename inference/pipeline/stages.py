@@ -212,6 +212,17 @@ def _court_frames(ctx: Context) -> np.ndarray | None:
     return report.active()
 
 
+def _court_spans(ctx: Context) -> list[tuple[int, int]] | None:
+    """The court-view shots ``[(start, stop), ...]`` that the events and 3D stages handle one by one (None: no
+    shots.json or a single view of the whole clip — the clip is handled whole, as without shots)."""
+    from inference.shots import ShotReport
+
+    if _court_frames(ctx) is None:
+        return None
+    spans = ShotReport.read(_shots_path(ctx)).court_spans()
+    return None if spans == [(0, ctx.clip.n_frames)] else spans
+
+
 # ------------------------------------------------------------------------------------------- detect
 def _weights_path(ctx: Context) -> Path:
     from inference.detection.detect import shipped_weights
@@ -288,10 +299,19 @@ def _events_run(ctx: Context) -> Outcome:
         raise StageError(f"{ctx.cfg.events}: hit-event checkpoint not found — pass an existing file with --events")
     det = EventDetector.from_checkpoint(ctx.cfg.events, sport=clip.info.sport)
     frames = clip.frames(cache_size=16)
+    spans = _court_spans(ctx)
     try:
-        result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
-                             players=players if players is not None and len(players) else None, frames=frames,
-                             keep_all=not ctx.cfg.rally_only)
+        if spans is None:
+            result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
+                                 players=players if players is not None and len(players) else None, frames=frames,
+                                 keep_all=not ctx.cfg.rally_only)
+        else:  # a broadcast clip: each court-view shot on its own, no event window across a cut
+            from .per_shot import events_per_shot
+
+            result = events_per_shot(det, clip.read_ball(), spans, clip.n_frames, clip.info.fps, clip.info.width,
+                                     clip.info.height, camera=camera,
+                                     players=players if players is not None and len(players) else None,
+                                     frames=frames, keep_all=not ctx.cfg.rally_only)
     finally:
         frames.close()
     clip.write_events(result.events)
@@ -303,7 +323,8 @@ def _events_run(ctx: Context) -> Outcome:
         raise StageError(f"{clip.ball_path}: no hit events found, so the flights cannot be cut — check ball.csv "
                          "(label or re-detect the ball) or pass another --events model")
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
-                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")")
+                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")" +
+                   (f" in {len(spans)} court-view shots" if spans is not None else ""))
 
 
 def _write_rally(clip, result) -> None:
@@ -362,11 +383,18 @@ def _reconstruct_run(ctx: Context) -> Outcome:
         obs = obs.with_track(CameraTrack.read(_camera_track_path(ctx), clip.n_frames).stabilise(obs.uv))
     if not len(obs.event_frames):
         raise StageError(f"{clip.events_path}: needs at least one event (a bounce or a hit) to anchor the flight")
-    fit = reconstruct(obs, ctx.cfg.method)
+    spans = _court_spans(ctx)
+    if spans is None:
+        fit = reconstruct(obs, ctx.cfg.method)
+    else:  # a broadcast clip: each court-view shot fitted on its own, no flight across a cut
+        from .per_shot import reconstruct_per_shot
+
+        fit = reconstruct_per_shot(obs, spans, ctx.cfg.method)
     fit.save(clip)
     ok = sum(s.ok for s in fit.segments)
     if ok == 0:
-        reasons = "; ".join(sorted({s.reason for s in fit.segments if not s.ok}))
+        reasons = "; ".join(sorted({s.reason for s in fit.segments if not s.ok})) or \
+            "no event in any court-view shot of shots.json"
         raise StageError(f"{clip.root}: no flight could be reconstructed ({reasons}) — check ball.csv and events.csv")
     # flights that cannot be fitted (too few detections between two events) are normal in a real rally: they
     # are listed in segments.json with their reason, and the run still counts as complete
@@ -374,6 +402,8 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     verdict = "" if not pl else (", plausible" if pl["plausible"] else
                                  f", NOT plausible ({'; '.join(pl.get('not_plausible_because', []))})")
     shift = f"; 2D stabilised by {_camera_track_path(ctx).name}" if stabilised else ""
+    if spans is not None:
+        shift += f"; {len(spans)} court-view shots fitted apart (shots.json)"
     return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed{verdict}{shift}")
 
 
@@ -402,7 +432,7 @@ def build_stages() -> list[Stage]:
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
-                                     "weights": _events_weights(ctx)},
+                                     "weights": _events_weights(ctx), "shots": _shots_path(ctx)},
               lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),
@@ -410,7 +440,7 @@ def build_stages() -> list[Stage]:
               lambda ctx: {"pose": ctx.cfg.pose}, lambda ctx: [ctx.clip.players_path], _players_run),
         Stage("reconstruct", lambda ctx: {"ball": ctx.clip.ball_path, "events": ctx.clip.events_path,
                                           "camera": camera(ctx), "players": ctx.clip.players_path,
-                                          "camera_track": _camera_track_path(ctx)},
+                                          "camera_track": _camera_track_path(ctx), "shots": _shots_path(ctx)},
               lambda ctx: {"method": ctx.cfg.method},
               lambda ctx: [ctx.clip.ball_3d_path, ctx.clip.segments_path], _reconstruct_run,
               requires=("events",)),

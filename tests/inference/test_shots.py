@@ -120,3 +120,113 @@ def test_infer_searches_court_views_only(tmp_path, capsys):
     px = np.linalg.norm((ball.xy[seen] - gt.xy[seen]) * [1280, 720], axis=1)
     assert seen.sum() > 0.5 * ((gt.visibility > 0) & ~off).sum() and np.median(px) < 5, (seen.sum(), np.median(px))
     assert "frames outside court views not searched" in next(s.note for s in report.stages if s.name == "detect")
+
+
+# ------------------------------------------------------------------ events and 3D per court-view shot
+OFF = np.zeros(240, bool)
+OFF[CLOSEUP[0]:CLOSEUP[1]] = OFF[OTHER[0]:OTHER[1]] = True
+
+
+def _broadcast(tmp_path: Path, spliced: Clip, shots: bool = True) -> Clip:
+    """The spliced clip with its camera, the padel ground truth's events and (``shots``) its shots.json.
+    ball.csv keeps the padel ball in the close-up and the other camera's frames too — as a careless label
+    or a tracker would — so only the shots keep those frames out."""
+    from inference.shots import Shot
+
+    root = tmp_path / "clip"
+    shutil.copytree(spliced.root, root)
+    shutil.copy(SAMPLE / "padel_sample" / "gt" / "camera.yaml", root / "camera.yaml")
+    if shots:
+        ShotReport([Shot(a, b, not OFF[a], 1.0, "court lines") for a, b in zip(BOUNDS[:-1], BOUNDS[1:])],
+                   240, 30.0).write(root / "shots.json")
+    return Clip(root)
+
+
+def test_events_are_decoded_per_court_view_shot(tmp_path, spliced):
+    """The shipped hit-event model on the labelled ball: no event in the close-up or the other camera's frames
+    (the ball.csv has the ball there), the court views' events still found."""
+    from inference.pipeline.run import run_pipeline
+    from inference.pipeline.stages import PipelineConfig
+
+    clip = _broadcast(tmp_path, spliced)
+    gt = clip.read_events()
+    report = run_pipeline(clip, PipelineConfig(progress=False, pose="none", overwrite=True), only={"events"})
+    stage = next(s for s in report.stages if s.name == "events")
+    assert stage.status == "done" and "in 3 court-view shots" in stage.note, report.table()
+    ev = clip.read_events()
+    assert len(ev) and not OFF[ev.frame].any(), ev.frame
+    court_gt = gt.frame[~OFF[gt.frame]]
+    found = [np.min(np.abs(ev.frame - f)) <= 3 for f in court_gt]
+    assert np.mean(found) >= 0.7, (ev.frame, court_gt)
+
+
+def test_3d_fit_never_joins_frames_across_a_cut(tmp_path, spliced):
+    """Ground-truth ball and events: every flight lies inside one court-view shot, frames outside court views
+    have no 3D and segments.json says why; the court views are reconstructed close to the ground truth.
+    Without shots.json the same clip gets flights across the cuts (what the shots prevent)."""
+    from inference.clipio import read_ball_3d_csv
+    from inference.pipeline.per_shot import LEFT_OUT
+    from inference.pipeline.run import run_pipeline
+    from inference.pipeline.stages import PipelineConfig
+
+    clip = _broadcast(tmp_path, spliced)
+    report = run_pipeline(clip, PipelineConfig(progress=False, pose="none"), only={"reconstruct"})
+    stage = next(s for s in report.stages if s.name == "reconstruct")
+    assert stage.status == "done" and "3 court-view shots fitted apart" in stage.note, report.table()
+    seg = json.loads(clip.segments_path.read_text())
+    views = [(a, b) for a, b in zip(BOUNDS[:-1], BOUNDS[1:]) if not OFF[a]]
+    ok = [s for s in seg["segments"] if s["reconstructed"]]
+    assert len(ok) >= 8
+    for s in seg["segments"]:
+        assert any(a <= s["start_frame"] <= s["end_frame"] < b for a, b in views), s
+    left = [e for e in seg["shots"] if not e["court_view"]]
+    assert [(e["start_frame"], e["end_frame"]) for e in left] == [(80, 119), (160, 189)]
+    assert {e["reason"] for e in left} == {LEFT_OUT}
+    b3 = clip.read_ball_3d()
+    assert len(b3) > 100 and not OFF[b3.frame].any()
+    truth = read_ball_3d_csv(SAMPLE / "padel_sample" / "gt" / "ball_3d.csv")
+    xyz = dict(zip(truth.frame.tolist(), truth.xyz))
+    err = np.array([np.linalg.norm(p - xyz[f]) for f, p in zip(b3.frame.tolist(), b3.xyz) if f in xyz])
+    assert np.median(err) < 0.3, np.median(err)
+
+    whole = _broadcast(tmp_path / "whole", spliced, shots=False)
+    run_pipeline(whole, PipelineConfig(progress=False, pose="none"), only={"reconstruct"})
+    across = [s for s in json.loads(whole.segments_path.read_text())["segments"]
+              if not any(a <= s["start_frame"] <= s["end_frame"] < b for a, b in views)]
+    assert across  # the flights over the close-up and the other camera
+
+
+def test_one_shot_clip_reconstructs_as_without_shots(tmp_path, spliced):
+    """A shots.json of one court view changes nothing: the same flights and 3D as with no shots.json."""
+    from inference.pipeline.run import run_pipeline
+    from inference.pipeline.stages import PipelineConfig
+    from inference.shots import Shot
+
+    out = {}
+    for name in ("none", "one"):
+        clip = _broadcast(tmp_path / name, spliced, shots=False)
+        if name == "one":
+            ShotReport([Shot(0, 240, True, 1.0, "single shot")], 240, 30.0).write(clip.root / "shots.json")
+        run_pipeline(clip, PipelineConfig(progress=False, pose="none"), only={"reconstruct"})
+        seg = json.loads(clip.segments_path.read_text())
+        out[name] = ([{k: v for k, v in s.items()} for s in seg["segments"]], "shots" in seg, clip.read_ball_3d())
+    assert out["none"][0] == out["one"][0] and not out["one"][1]
+    assert out["none"][2] == out["one"][2]
+
+
+def test_shot_frames_and_rows_renumber_a_shot_from_zero(spliced):
+    """What a crop event model and the per-shot stages read of shot 120–159: its own frames and rows from 0."""
+    from inference.pipeline.per_shot import ShotFrames
+    from inference.shots import shot_rows
+
+    with spliced.frames(cache_size=0) as src:
+        shot = ShotFrames(src, 120, 160)
+        frames = list(shot.iter(0, 100))
+        assert len(shot) == len(frames) == 40
+        assert np.array_equal(frames[5], src.read(125)) and np.array_equal(shot.read(39), src.read(159))
+    ball = spliced.read_ball()
+    rows = shot_rows(ball, 120, 160)
+    assert rows.frame.tolist() == list(range(40))
+    assert np.array_equal(rows.xy, ball.xy[(ball.frame >= 120) & (ball.frame < 160)], equal_nan=True)
+    ev = shot_rows(spliced.read_events(), 120, 160)
+    assert ev.frame.tolist() == [14, 27] and list(ev.event) == ["ground", "player_far"]
