@@ -139,7 +139,7 @@ class EventDetector:
     @classmethod
     def from_blob(cls, blob: dict[str, Any]) -> EventDetector:
         class_set = ClassSet.from_dict(blob["class_set"])
-        features = FeatureConfig.from_dict(blob["features"])
+        features = FeatureConfig.from_model_file(blob["features"])
         net = None
         if blob["kind"] == "hitnet":
             net = HitNet(**blob["net"])
