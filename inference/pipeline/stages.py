@@ -318,6 +318,12 @@ def _players_run(ctx: Context) -> Outcome:
     return Outcome(len(poses), f"{len(players.ids())} players")
 
 
+def _players_outputs(ctx: Context) -> list[Path]:
+    """players.csv, except with ``--pose none``: the stage writes nothing, and a players.csv the user brought
+    (another tool's) is read by the events and reconstruct stages."""
+    return [] if ctx.cfg.pose == "none" else [ctx.clip.players_path]
+
+
 # -------------------------------------------------------------------------------------- reconstruct
 def _reconstruct_run(ctx: Context) -> Outcome:
     from inference.reconstruct.api import reconstruct
@@ -361,7 +367,7 @@ def build_stages() -> list[Stage]:
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
-              lambda ctx: {"pose": ctx.cfg.pose}, lambda ctx: [ctx.clip.players_path], _players_run),
+              lambda ctx: {"pose": ctx.cfg.pose}, _players_outputs, _players_run),
         Stage("events", _events_inputs, lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),
