@@ -20,25 +20,15 @@ from pathlib import Path
 
 import torch
 
-GAPS = dict(p_clean=0.0, integer_px=True, far_miss=0.3, top_crop=0.05)  # bench_event_conditions' real tracker
+from bench_event_conditions import CONDITIONS as BALL_CONDITIONS  # bench/ is the script's folder
+from bench_event_conditions import event_counts
+
+GAPS = BALL_CONDITIONS["real-tracker-like, gaps at contacts"]
 CONDITIONS = {
     "annotated ball": None,
     "real-tracker-like, no gaps at contacts": dict(GAPS, p_occlude_near=0.0, p_occlude_far=0.0, p_gap_event=0.0),
-    "real-tracker-like, gaps at contacts": dict(GAPS, p_occlude_near=0.9, p_occlude_far=0.9),
+    "real-tracker-like, gaps at contacts": GAPS,
 }
-
-
-def score(det, clips, tracks, players, cs):
-    """Event counts of ``det`` on the clips with these ball tracks and players (None: none given)."""
-    from inference.events.metrics import EventCounts, tolerance_frames
-
-    counts = EventCounts(cs.classes)
-    for c, tr, pl in zip(clips, tracks, players):
-        r = det.predict(tr, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True,
-                        players=pl)
-        counts.add(c.events.frame, [cs.encode_label(str(e)) or 0 for e in c.events.event], r.events.frame,
-                   [cs.index(x) for x in r.coarse], tolerance_frames(c.fps))
-    return counts
 
 
 def main(argv=None) -> None:
@@ -82,7 +72,7 @@ def main(argv=None) -> None:
         tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig(**kw))
         lines += [f"**{cond}**", "", "| model | all | " + " | ".join(cs.classes[1:]) + " |", "|---|" + "---|" * cs.n]
         for name, det, pl in rows:
-            s = score(det, clips, tracks, pl, cs).scores
+            s = event_counts(det, clips, tracks, pl).scores
             f1 = [s()["f1"]] + [s(i)["f1"] for i in range(1, cs.n)]
             lines.append(f"| {name} | " + " | ".join(f"{v:.3f}" for v in f1) + " |")
             print(lines[-1], flush=True)

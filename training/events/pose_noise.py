@@ -15,13 +15,13 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from inference.clipio import PlayerTracks
 
-from .degrade import _pair
+from .degrade import _pair, config_from_dict
 
 
 @dataclass(frozen=True)
@@ -73,14 +73,7 @@ class PoseNoiseConfig:
 
     @classmethod
     def from_dict(cls, d) -> PoseNoiseConfig:
-        if isinstance(d, PoseNoiseConfig):
-            return d
-        d = dict(d or {"enabled": False})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown data.pose_noise keys {unknown}; known: {sorted(known)}")
-        return cls(**d)
+        return config_from_dict(cls, d, "data.pose_noise")
 
 
 _LR = np.array([0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15])  # COCO-17 left ↔ right
