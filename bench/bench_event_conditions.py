@@ -23,6 +23,17 @@ CONDITIONS = {
 }
 
 
+def arg_parser() -> argparse.ArgumentParser:
+    """The options shared with bench_events_players.py."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sport", default="tennis")
+    ap.add_argument("--clips", type=int, default=60)
+    ap.add_argument("--fps", type=float, default=50.0)
+    ap.add_argument("--weights", nargs="+", default=["shipped"])
+    ap.add_argument("--cache", default="runs/events_cache")
+    return ap
+
+
 def event_counts(det, clips, tracks, players=None):
     """Event counts of ``det`` on ``clips`` with these ball tracks (and players, one per clip), every event
     kept, ±2 frames at 50 fps (scaled)."""
@@ -44,13 +55,7 @@ def main(argv=None) -> None:
     from training.events.degrade import DegradeConfig, degrade_all
     from training.events.simulate import simulate_clips
 
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--sport", default="tennis")
-    ap.add_argument("--clips", type=int, default=60)
-    ap.add_argument("--fps", type=float, default=50.0)
-    ap.add_argument("--weights", nargs="+", default=["shipped"])
-    ap.add_argument("--cache", default="runs/events_cache")
-    args = ap.parse_args(argv)
+    args = arg_parser().parse_args(argv)
     torch.set_num_threads(1)
     t0 = time.process_time()
     clips = simulate_clips(args.sport, args.clips, 6161, args.cache, progress=False, fps=args.fps)

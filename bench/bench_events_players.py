@@ -14,14 +14,13 @@ Markdown table per condition and the CPU time (``time.process_time``).
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
 import torch
 
 from bench_event_conditions import CONDITIONS as BALL_CONDITIONS  # bench/ is the script's folder
-from bench_event_conditions import event_counts
+from bench_event_conditions import arg_parser, event_counts
 
 GAPS = BALL_CONDITIONS["real-tracker-like, gaps at contacts"]
 CONDITIONS = {
@@ -40,12 +39,7 @@ def main(argv=None) -> None:
     from training.events.pose_noise import PoseNoiseConfig, noisy_all
     from training.events.simulate import simulate_clips
 
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--sport", default="tennis")
-    ap.add_argument("--clips", type=int, default=60)
-    ap.add_argument("--fps", type=float, default=50.0)
-    ap.add_argument("--weights", nargs="+", default=["shipped"])
-    ap.add_argument("--cache", default="runs/events_cache")
+    ap = arg_parser()
     ap.add_argument("--out", type=Path, help="also write the tables here")
     args = ap.parse_args(argv)
     logging.getLogger("inference.events.detector").setLevel(logging.ERROR)  # "model without players" rows
