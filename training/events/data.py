@@ -86,8 +86,9 @@ def clips_from_folder(root, split: str, seed: int = 0, sources=None) -> list[Sim
     return [c for c, _ in clips_with_source(root, split, seed, sources)]
 
 
-def clips_with_source(root, split: str, seed: int = 0, sources=None) -> list[tuple[SimClip, int]]:
-    """:func:`clips_from_folder` with the index of the root each clip comes from."""
+def clips_with_source(root, split: str, seed: int = 0, sources=None, players: bool = False) -> list[tuple[SimClip, int]]:
+    """:func:`clips_from_folder` with the index of the root each clip comes from (``players``: read each
+    clip's players.csv, else gt/players.csv, when there is one)."""
     from training.datasets import resolve_sources, skip_unlabelled
 
     out = []
@@ -98,11 +99,11 @@ def clips_with_source(root, split: str, seed: int = 0, sources=None) -> list[tup
         if len(labelled) < len(clips):
             log.warning("%s (%s): %d clip(s) without events.csv skipped (events not labelled yet): %s", src.root,
                         split, len(clips) - len(labelled), ", ".join(c.root.name for c in clips if c not in labelled))
-        out += [(_sim_clip(c), k) for c in labelled]
+        out += [(_sim_clip(c, players), k) for c in labelled]
     return out
 
 
-def _sim_clip(clip: Clip) -> SimClip:
+def _sim_clip(clip: Clip, with_players: bool = False) -> SimClip:
     info = clip.info
     ball = clip.read_ball()
     n = info.n_frames or (clip.n_frames if (clip.root / info.video).exists() else None)
@@ -117,7 +118,7 @@ def _sim_clip(clip: Clip) -> SimClip:
         except (FileNotFoundError, OSError, FormatError):
             continue
     players = None
-    for gt in (False, True):  # the clip's own players.csv (a pose backend's), else the generator's
+    for gt in (False, True) if with_players else ():  # the clip's players.csv (a pose backend's), else gt/
         try:
             players = clip.read_players(gt=gt)
             break
@@ -360,11 +361,12 @@ class EventDataModule(L.LightningDataModule):
 
     def raw_clips(self, split: str) -> list[SimClip]:
         if self.source == "folder":
-            pairs = clips_with_source(self.root, split, self.split_seed, self.sources)
+            pl = self.features.poses
+            pairs = clips_with_source(self.root, split, self.split_seed, self.sources, pl)
             if not pairs and split == "val":
                 log.warning("no labelled validation clips: tuning and checkpointing on the training clips "
                             "(optimistic); give the dataset a val split for an honest one")
-                pairs = clips_with_source(self.root, "train", self.split_seed, self.sources)
+                pairs = clips_with_source(self.root, "train", self.split_seed, self.sources, pl)
             clips = [c for c, _ in pairs]
             self.clip_source[split] = [k for _, k in pairs]
         else:

@@ -114,3 +114,28 @@ def test_data_module_builds_player_windows_and_redraws_the_noise(tmp_path):
     dm.redraw()
     dm.redraw()  # the second call draws new noise
     assert torch.equal(before[:, :, :5], ds.x[:, :, :5]) and not torch.equal(before[:, :, 5:], ds.x[:, :, 5:])
+
+
+def test_folder_clips_bring_their_players_csv(clip, tmp_path):
+    from inference.clipio import Clip, ClipInfo, Manifest, ManifestEntry
+
+    root = tmp_path / "ds"
+    entries = []
+    for split in ("train", "val", "test"):
+        c = Clip.create(root / split, ClipInfo(sport="padel", fps=clip.fps, width=clip.width, height=clip.height,
+                                               video="video.mp4", n_frames=clip.n_frames, split=split), exist_ok=True)
+        c.write_ball(clip.ball)
+        c.write_events(clip.events)
+        if split != "test":
+            c.write_players(clip.players, gt=split == "val")  # a pose backend's players.csv, or the generator's
+        entries.append(ManifestEntry(split, split))
+    Manifest(root, entries, name="pl", sport="padel").save()
+    dm = EventDataModule(sport="padel", class_set="padel6", features={"poses": True}, source="folder", root=str(root),
+                         window=12, pose_noise={"enabled": False})
+    for split in ("train", "val"):
+        sim = dm.labelled(split)[0].sim
+        assert sim.players is not None and len(sim.players) == len(clip.players)
+        assert dm.labelled(split)[0].feats[:, 5 + COL["present"]].mean() > 0.95
+    assert dm.labelled("test")[0].sim.players is None and np.all(dm.labelled("test")[0].feats[:, 5:] == 0)
+    ball_only = EventDataModule(sport="padel", class_set="padel6", source="folder", root=str(root), window=12)
+    assert ball_only.labelled("train")[0].sim.players is None  # not read when the model does not use them
