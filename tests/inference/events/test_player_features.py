@@ -169,3 +169,13 @@ def test_choose_weights_prefers_a_shipped_player_model_only_with_players(tennis,
     assert mod.choose_weights(None, "tennis", PlayerTracks.empty()).name == mod.DEFAULT_WEIGHTS["tennis"]
     assert mod.choose_weights(None, "tennis", None).name == mod.DEFAULT_WEIGHTS["tennis"]
     assert mod.choose_weights(tmp_path / "mine.pth.tar", "tennis", tennis.players).name == "mine.pth.tar"
+
+
+def test_the_shipped_player_aware_tennis_model_reads_players(tennis):
+    from inference.events.detector import choose_weights
+
+    det = EventDetector.from_checkpoint(choose_weights(None, "tennis", tennis.players), sport="tennis")
+    assert det.wants_players and det.features.n_features == 29 and det.class_set.name == "tennis4"
+    c = tennis
+    r = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)
+    assert len(r.events) > 5 and np.allclose(r.probs.sum(axis=1), 1.0, atol=1e-4)

@@ -72,6 +72,10 @@ def test_infer_feeds_players_to_a_player_aware_model(tennis_clip, player_model, 
     assert len(with_players) and len(without)
     assert main([*args, "--overwrite"]) == 0
     assert re.search(r"^events\s+done.*; ball only\)", capsys.readouterr().out, re.M)
+    # with players and no --events, tennis uses the shipped player-aware model
+    shutil.copy(bare / "gt" / "players.csv", bare / "players.csv")
+    assert main([*args, "--overwrite"]) == 0
+    assert re.search(r"^events\s+done.*; player-aware\)", capsys.readouterr().out, re.M)
 
 
 def test_events_command_reads_players(tennis_clip, player_model, tmp_path, capsys):
