@@ -23,19 +23,39 @@ CONDITIONS = {
 }
 
 
-def main(argv=None) -> None:
-    from inference.events import EventDetector
-    from inference.events.metrics import EventCounts, tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.simulate import simulate_clips
-
+def arg_parser() -> argparse.ArgumentParser:
+    """The options shared with bench_events_players.py."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--sport", default="tennis")
     ap.add_argument("--clips", type=int, default=60)
     ap.add_argument("--fps", type=float, default=50.0)
     ap.add_argument("--weights", nargs="+", default=["shipped"])
     ap.add_argument("--cache", default="runs/events_cache")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def event_counts(det, clips, tracks, players=None):
+    """Event counts of ``det`` on ``clips`` with these ball tracks (and players, one per clip), every event
+    kept, ±2 frames at 50 fps (scaled)."""
+    from inference.events.metrics import EventCounts, tolerance_frames
+
+    cs = det.class_set
+    counts = EventCounts(cs.classes)
+    for c, tr, pl in zip(clips, tracks, players or [None] * len(clips)):
+        r = det.predict(tr, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True,
+                        players=pl)
+        counts.add(c.events.frame, [cs.encode_label(str(e)) or 0 for e in c.events.event], r.events.frame,
+                   [cs.index(x) for x in r.coarse], tolerance_frames(c.fps))
+    return counts
+
+
+def main(argv=None) -> None:
+    from inference.events import EventDetector
+    from inference.events.metrics import tolerance_frames
+    from training.events.degrade import DegradeConfig, degrade_all
+    from training.events.simulate import simulate_clips
+
+    args = arg_parser().parse_args(argv)
     torch.set_num_threads(1)
     t0 = time.process_time()
     clips = simulate_clips(args.sport, args.clips, 6161, args.cache, progress=False, fps=args.fps)
@@ -47,11 +67,7 @@ def main(argv=None) -> None:
         tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig(**kw))
         print(f"**{cond}**\n\n| model | all | " + " | ".join(cs.classes[1:]) + " |\n|---|" + "---|" * cs.n)
         for name, det in models:
-            counts = EventCounts(cs.classes)
-            for c, tr in zip(clips, tracks):
-                r = det.predict(tr, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True)
-                counts.add(c.events.frame, [cs.encode_label(str(e)) or 0 for e in c.events.event], r.events.frame,
-                           [cs.index(x) for x in r.coarse], tolerance_frames(c.fps))
+            counts = event_counts(det, clips, tracks)
             f1 = [counts.scores()["f1"]] + [counts.scores(i)["f1"] for i in range(1, cs.n)]
             print(f"| {name} | " + " | ".join(f"{v:.3f}" for v in f1) + " |", flush=True)
         print()

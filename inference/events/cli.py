@@ -12,11 +12,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Runs the hit-event model on the clip's ball track (ball.csv: annotated or from rally3d "
         "detect) and writes events.csv with fine-grained labels. Grouped classes (padel ground_or_other_wall) "
         "are resolved to their surface with the clip's camera.yaml when present, else written as `ground`. "
-        "Default model: the shipped one of the clip's sport (inference/weights/hitnet_<sport>.pth.tar).",
+        "Default model: the shipped one of the clip's sport (inference/weights/hitnet_<sport>.pth.tar), or its "
+        "player-aware one (hitnet_<sport>_players.pth.tar) when the clip has players.csv and that model is shipped.",
     )
     p.add_argument("clip", type=Path)
     p.add_argument("--weights", type=Path, help="a hit-event model file; default: the shipped one")
     p.add_argument("--ball", type=Path, help="ball.csv to read instead of the clip's")
+    p.add_argument("--players", type=Path,
+                   help="players.csv to read instead of the clip's (read by player-aware models; default: the "
+                   "clip's players.csv when present)")
+    p.add_argument("--no-players", action="store_true", help="ignore players.csv (ball-only model and input)")
     p.add_argument("--no-camera", action="store_true", help="ignore camera.yaml (grouped classes → default label)")
     p.add_argument("--out", type=Path, help="write here instead of the clip's events.csv")
     p.add_argument("--rally-only", action="store_true",
@@ -28,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from inference.clipio import Clip, FormatError, read_ball_csv, write_events_csv
 
-    from .detector import EventDetector
+    from .detector import EventDetector, choose_weights
 
     clip = Clip(args.clip)
     info = clip.info
@@ -42,11 +47,12 @@ def run(args: argparse.Namespace) -> int:
             except (FileNotFoundError, OSError, FormatError):
                 continue
     n_frames = info.n_frames or (int(ball.frame[-1]) + 1 if len(ball) else 0)
-    det = EventDetector.from_checkpoint(args.weights, sport=info.sport)
+    players = None if args.no_players else read_players_arg(clip, args.players, n_frames)
+    det = EventDetector.from_checkpoint(choose_weights(args.weights, info.sport, players), sport=info.sport)
     frames = clip.frames(cache_size=0) if det.kind == "crop" else None  # the crop model looks at the video
     try:
         result = det.predict(ball, info.fps, info.width, info.height, camera=camera, n_frames=n_frames,
-                             frames=frames, keep_all=not args.rally_only)
+                             frames=frames, keep_all=not args.rally_only, players=players)
     finally:
         if frames is not None:
             frames.close()
@@ -59,7 +65,29 @@ def run(args: argparse.Namespace) -> int:
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
     seg = result.rally
-    print(f"{clip.root.name}: rally frames {seg.start}–{seg.end}, {len(result.events)} events {counts} "
+    model = f"player-aware model, players of {len(players.ids())} tracks" if det.wants_players and players \
+        else "ball-only model" if not det.wants_players else "player-aware model WITHOUT players"
+    print(f"{clip.root.name}: {model}; rally frames {seg.start}–{seg.end}, {len(result.events)} events {counts} "
           f"({len(result.outside)} judged outside the point{'' if args.rally_only else ', kept'}); wrote {path} "
           f"and {rally_path}")
     return 0
+
+
+def read_players_arg(clip, path: Path | None, n_frames: int | None):
+    """``--players FILE`` (an error when unreadable) or the clip's players.csv (optional: a warning and
+    None when it cannot be read); None when there is none."""
+    import logging
+
+    from inference.clipio import FormatError, read_players_csv
+
+    if path is not None:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"--players {path}: file not found")
+        return read_players_csv(path, n_frames=n_frames or None)
+    if not clip.players_path.is_file():
+        return None
+    try:
+        return clip.read_players(n_frames=n_frames or None)
+    except (FormatError, ValueError, OSError) as e:
+        logging.getLogger(__name__).warning("%s cannot be read (%s): events from the ball alone", clip.players_path, e)
+        return None

@@ -48,6 +48,9 @@ log = logging.getLogger(__name__)
 FORMAT = "rally3d-events"
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 DEFAULT_WEIGHTS = {"padel": "hitnet_padel.pth.tar", "tennis": "hitnet_tennis.pth.tar"}
+#: Player-aware models (``features.poses``), used by default when the clip has players; shipped only where
+#: they beat the ball-only model (docs/events.md): a sport without a file here falls back to the ball-only one.
+PLAYER_WEIGHTS = {"padel": "hitnet_padel_players.pth.tar", "tennis": "hitnet_tennis_players.pth.tar"}
 KINDS = ("hitnet", "physics", "crop")
 
 
@@ -81,6 +84,29 @@ def default_weights(sport: str) -> Path:
         raise KeyError(f"no shipped hit-event model for sport {sport!r}; known: {sorted(DEFAULT_WEIGHTS)}. "
                        "Pass a model file (train one with python train.py +experiment=hitnet_<sport>).")
     return WEIGHTS_DIR / DEFAULT_WEIGHTS[sport]
+
+
+def has_players(players: PlayerTracks | None) -> bool:
+    """Whether a players table holds anything a player-aware model can read."""
+    return players is not None and len(players) > 0
+
+
+def choose_weights(path: str | Path | None, sport: str, players: PlayerTracks | None = None) -> Path:
+    """The model file to use: ``path`` when given; else the shipped player-aware model of ``sport`` when
+    ``players`` has rows and such a model is shipped; else the shipped ball-only model."""
+    if path is not None:
+        return Path(path)
+    if has_players(players) and sport in PLAYER_WEIGHTS and (WEIGHTS_DIR / PLAYER_WEIGHTS[sport]).is_file():
+        return WEIGHTS_DIR / PLAYER_WEIGHTS[sport]
+    return default_weights(sport)
+
+
+def model_wants_players(path: str | Path) -> bool:
+    """Whether the model file reads players (``features.poses``); False for files that cannot be read."""
+    try:
+        return bool(load_model_file(path)["features"].get("poses", False))
+    except (FileNotFoundError, ValueError, KeyError, TypeError):
+        return False
 
 
 def load_model_file(path: str | Path) -> dict[str, Any]:
@@ -139,7 +165,7 @@ class EventDetector:
     @classmethod
     def from_blob(cls, blob: dict[str, Any]) -> EventDetector:
         class_set = ClassSet.from_dict(blob["class_set"])
-        features = FeatureConfig.from_dict(blob["features"])
+        features = FeatureConfig.from_model_file(blob["features"])
         net = None
         if blob["kind"] == "hitnet":
             net = HitNet(**blob["net"])
@@ -177,6 +203,11 @@ class EventDetector:
     def ref_fps(self) -> float | None:
         return self.features.ref_fps
 
+    @property
+    def wants_players(self) -> bool:
+        """Whether the model reads the players (a player-aware HitNet); it still runs without them."""
+        return bool(self.features.poses)
+
     def ref_probs(self, ball: BallTrack, n_frames: int, fps: float, *, camera=None,
                   players: PlayerTracks | None = None, frames=None) -> np.ndarray:
         """``(T', C)`` per-frame class probabilities at the reference rate (``frames``: crop models)."""
@@ -207,7 +238,7 @@ class EventDetector:
             ball: the 2D ball (annotated or detected), normalised coordinates.
             fps: the clip's frame rate; width, height: its image size (pixels).
             camera: resolves grouped classes to their surface (else their default label).
-            players: pose tracks (used by models trained with poses).
+            players: ``players.csv`` (read by player-aware models, ``features.poses``; ignored by the others).
             frames: a ``FrameSource`` (needed by crop models, unused by the ball-only ones).
             n_frames: frames in the clip (default: the frame source's length or the track's last frame + 1).
             keep_all: keep the events judged outside the point (warm-up bounces, the ball after it) in
@@ -225,6 +256,10 @@ class EventDetector:
         if n_frames is None:
             n_frames = len(frames) if frames is not None and hasattr(frames, "__len__") else (
                 int(ball.frame[-1]) + 1 if len(ball) else 0)
+        if self.wants_players and not has_players(players):
+            log.warning("this hit-event model reads the players but none were given (players.csv): it runs on "
+                        "the ball alone, as it was trained to when players are missing; a ball-only model "
+                        "(the default without players) may do better")
         C = self.class_set.n
         if n_frames == 0 or not np.any(ball.visibility > 0):
             warnings.warn("the ball track has no visible ball: no events can be detected", stacklevel=2)

@@ -12,8 +12,14 @@ Feature columns per (resampled) frame, in this order:
 - ``seen`` (``velocity``): 1 where the ball is known.
 - 8 corner values (``corners``): the four ground corners of the court projected by the camera, in
   ``[1, 2]`` (0 when no camera or outside the image).
-- 34 × players values (``poses``): COCO-17 keypoints of up to ``players`` players (near team first),
-  in ``[1, 2]``, 0 where missing.
+- 2 × 12 player values (``poses``, :data:`PLAYER_COLUMNS`), for the near side then the far side: the
+  side's player nearest the ball (padel: of its two), from ``players.csv`` — ``present`` (a row on that side),
+  the court position (``court_x, court_y``: metres from the centre / half the court's width, from the net /
+  half its length), the body centre minus the ball (image fractions × ``rel_scale``), ``pose`` (the racket
+  hand's wrist found), the racket wrist minus the ball (× ``rel_scale``), and both wrists relative to the
+  body centre in units of its torso (racket hand first: the wrist that moves most over the clip). Every
+  value is 0 where unknown (no player, no pose, no ball), so a missing player or pose reads as zeros with
+  its mask at 0.
 """
 from __future__ import annotations
 
@@ -24,6 +30,12 @@ import numpy as np
 from inference.clipio import BallTrack, PlayerTracks
 
 CORNERS = ("near_left", "near_right", "far_left", "far_right")
+SIDES = ("near", "far")
+#: The per-side player columns of the ``poses`` block (see the module docstring).
+PLAYER_COLUMNS = ("present", "court_x", "court_y", "body_dx", "body_dy", "pose", "wrist_dx", "wrist_dy",
+                  "racket_wrist_x", "racket_wrist_y", "other_wrist_x", "other_wrist_y")
+#: Layout version of the ``poses`` block written into model files (1: raw keypoints, never trained, dropped).
+POSE_LAYOUT = 2
 
 
 @dataclass(frozen=True)
@@ -32,9 +44,11 @@ class FeatureConfig:
 
     Attributes:
         ref_fps: frame rate the track is resampled to (None: keep the clip's).
-        velocity: add ``vx, vy, seen``; corners: add the 4 projected ground corners; poses: add keypoints.
-        players: number of players whose keypoints are used (poses).
+        velocity: add ``vx, vy, seen``; corners: add the 4 projected ground corners; poses: add the
+            players (near and far side: position, body and wrists relative to the ball, masks).
+        players: players on court (informative; the ``poses`` block always has one slot per side).
         velocity_scale: multiplies the per-frame displacement (normalised units) of ``vx, vy``.
+        rel_scale: multiplies image offsets from the ball (body, wrist) in the ``poses`` block.
     """
 
     ref_fps: float | None = 50.0
@@ -43,6 +57,7 @@ class FeatureConfig:
     poses: bool = False
     players: int = 4
     velocity_scale: float = 10.0
+    rel_scale: float = 10.0
 
     def __post_init__(self) -> None:
         if self.ref_fps is not None and self.ref_fps <= 0:
@@ -53,16 +68,35 @@ class FeatureConfig:
         if isinstance(d, FeatureConfig):
             return d
         d = dict(d or {})
-        return cls(**{k: d[k] for k in ("ref_fps", "velocity", "corners", "poses", "players", "velocity_scale")
-                     if k in d})
+        return cls(**{k: d[k] for k in ("ref_fps", "velocity", "corners", "poses", "players", "velocity_scale",
+                                        "rel_scale") if k in d})
+
+    @classmethod
+    def from_model_file(cls, d) -> FeatureConfig:
+        """The features a model file records; a file of the first ``poses`` layout (raw keypoints, which no
+        shipped or trained model used) is an error that says to retrain."""
+        if dict(d or {}).get("poses") and int(dict(d).get("pose_layout", 1)) != POSE_LAYOUT:
+            raise ValueError("this hit-event model was made with the first `poses` layout (raw keypoints), which "
+                             "rally3d no longer builds: retrain it (python train.py +experiment=hitnet_<sport>_players)")
+        return cls.from_dict(d)
 
     def to_dict(self) -> dict:
         return {"ref_fps": self.ref_fps, "velocity": self.velocity, "corners": self.corners,
-                "poses": self.poses, "players": self.players, "velocity_scale": self.velocity_scale}
+                "poses": self.poses, "players": self.players, "velocity_scale": self.velocity_scale,
+                "rel_scale": self.rel_scale, **({"pose_layout": POSE_LAYOUT} if self.poses else {})}
+
+    @property
+    def n_player_features(self) -> int:
+        return len(SIDES) * len(PLAYER_COLUMNS) * self.poses
+
+    @property
+    def player_offset(self) -> int:
+        """First column of the ``poses`` block."""
+        return 2 + 3 * self.velocity + 8 * self.corners
 
     @property
     def n_features(self) -> int:
-        return 2 + 3 * self.velocity + 8 * self.corners + 34 * self.players * self.poses
+        return self.player_offset + self.n_player_features
 
 
 # ------------------------------------------------------------------------------------------- resampling
@@ -143,22 +177,115 @@ def court_corner_features(camera, court, n: int) -> np.ndarray:
     return out
 
 
-def pose_features(players: PlayerTracks | None, n_frames: int, fps: float, ref_fps: float | None,
-                  n_players: int) -> np.ndarray:
-    """``(T', 34 · n_players)`` keypoints (near team first, then by id) in ``[1, 2]``, 0 where missing."""
-    t_ref = n_frames if ref_fps is None else max(int(round(n_frames * ref_fps / fps)), 1)
-    out = np.zeros((t_ref, 34 * n_players))
-    if players is None or len(players) == 0:
+_WRISTS = (9, 10)        # COCO-17 left, right wrist
+_TORSO = (5, 6, 11, 12)  # shoulders, hips
+
+
+def _nanmean(a: np.ndarray, axis: int) -> np.ndarray:
+    n = np.isfinite(a).sum(axis=axis)
+    return np.where(n > 0, np.nansum(a, axis=axis) / np.maximum(n, 1), np.nan)
+
+
+def _fill_ball(xy: np.ndarray) -> np.ndarray:
+    """``(T, 2)`` ball positions with gaps filled linearly (ends held): where the ball probably is."""
+    known = np.flatnonzero(np.isfinite(xy).all(axis=1))
+    if len(known) == 0:
+        return xy.copy()
+    t = np.arange(len(xy))
+    return np.stack([np.interp(t, known, xy[known, k]) for k in range(2)], axis=1)
+
+
+def player_side(players: PlayerTracks, court=None) -> np.ndarray:
+    """``(N,)`` side of each row: its ``team``, else the court position against the net, else ``""``."""
+    side = players.team.astype(object).copy()
+    if court is not None:
+        y = players.court_xy[:, 1]
+        unknown = (side == "") & np.isfinite(y)
+        side[unknown] = np.where(y[unknown] < court.net_y, "near", "far")
+    return side
+
+
+def _dense_player(p: PlayerTracks, n: int, min_score: float) -> dict[str, np.ndarray]:
+    """One player's rows → per-frame ``(n, …)`` arrays: present, court (2), centre (2), wrists (2, 2),
+    torso scale; NaN where unknown."""
+    keep = p.frame < n
+    f = p.frame[keep]
+    kp = p.keypoints[keep].copy()
+    score = kp[:, :, 2]
+    kp[(np.isfinite(score) & (score < min_score))[..., None].repeat(3, axis=2)] = np.nan
+    out = {"present": np.zeros(n, bool), "court": np.full((n, 2), np.nan), "centre": np.full((n, 2), np.nan),
+           "wrists": np.full((n, 2, 2), np.nan), "scale": np.full(n, np.nan)}
+    out["present"][f] = True
+    out["court"][f] = p.court_xy[keep]
+    torso = kp[:, list(_TORSO), :2]
+    centre = _nanmean(torso, axis=1)
+    box = p.bbox[keep]
+    box_c = np.stack([(box[:, 0] + box[:, 2]) / 2, (box[:, 1] + box[:, 3]) / 2], axis=1)
+    out["centre"][f] = np.where(np.isfinite(centre), centre, box_c)
+    shoulders, hips = _nanmean(kp[:, [5, 6], :2], axis=1), _nanmean(kp[:, [11, 12], :2], axis=1)
+    torso_len = np.linalg.norm(shoulders - hips, axis=1)
+    box_len = (box[:, 3] - box[:, 1]) / 3.0
+    out["scale"][f] = np.where(np.isfinite(torso_len) & (torso_len > 1e-4), torso_len, box_len)
+    out["wrists"][f] = kp[:, list(_WRISTS), :2]
+    return out
+
+
+def racket_hand(wrists: np.ndarray, centre: np.ndarray) -> int:
+    """0 (left) or 1 (right): the wrist that moves more about the body over the clip (the racket swings);
+    right when unknown. ``wrists (T, 2, 2)``, ``centre (T, 2)``."""
+    rel = wrists - centre[:, None, :]
+    spread = [float(np.nansum(np.nanvar(rel[:, k], axis=0))) if np.isfinite(rel[:, k]).all(axis=1).sum() > 2
+              else -1.0 for k in range(2)]
+    return 0 if spread[0] > spread[1] else 1
+
+
+def player_features(players: PlayerTracks | None, ball_xy: np.ndarray, court=None, rel_scale: float = 10.0,
+                    min_score: float = 0.1) -> np.ndarray:
+    """``(T, 24)`` the ``poses`` block at the clip's frames (near side, then far; :data:`PLAYER_COLUMNS`).
+
+    Args:
+        players: ``players.csv`` (None or empty: all zeros).
+        ball_xy: ``(T, 2)`` ball positions (normalised, NaN missing) at the same frames.
+        court: places rows without a team by their court position; normalises court positions.
+        min_score: keypoints scored below this are missing.
+    """
+    n = len(ball_xy)
+    P = len(PLAYER_COLUMNS)
+    out = np.zeros((n, len(SIDES) * P))
+    if players is None or len(players) == 0 or n == 0:
         return out
-    ids = sorted(players.ids(), key=lambda i: (0 if players.of_player(i).team[:1].tolist() == ["near"] else 1, i))
-    src = np.arange(t_ref) if ref_fps is None else np.round(np.arange(t_ref) * fps / ref_fps).astype(int)
-    for k, pid in enumerate(ids[:n_players]):
-        p = players.of_player(pid)
-        kp = np.full((n_frames, 34), np.nan)
-        keep = p.frame < n_frames
-        kp[p.frame[keep]] = p.keypoints[keep, :, :2].reshape(-1, 34)
-        vals = kp[np.clip(src, 0, n_frames - 1)]
-        out[:, 34 * k:34 * (k + 1)] = np.where(np.isfinite(vals), vals + 1.0, 0.0)
+    half = (np.asarray(court.size, float)[0] / 2, float(court.net_y)) if court is not None else (5.0, 10.0)
+    ball_seen = np.isfinite(ball_xy).all(axis=1)
+    ball_where = _fill_ball(ball_xy)
+    side = player_side(players, court)
+    for s, name in enumerate(SIDES):
+        dense = [_dense_player(players.of_player(pid), n, min_score)
+                 for pid in sorted(set(players.player_id[side == name].tolist()))]
+        if not dense:
+            continue
+        # per frame, the side's player nearest to where the ball is (padel: one of two)
+        dist = np.stack([np.where(d["present"], np.nan_to_num(np.linalg.norm(d["centre"] - ball_where, axis=1),
+                                                               nan=5.0), np.inf) for d in dense])
+        pick = np.argmin(dist, axis=0)
+        cols = np.zeros((n, P))
+        for k, d in enumerate(dense):
+            m = (pick == k) & d["present"]
+            if not m.any():
+                continue
+            hand = racket_hand(d["wrists"], d["centre"])
+            court_n = (d["court"] - [half[0], half[1]]) / [half[0], half[1]]
+            body = (d["centre"] - ball_xy) * rel_scale
+            wr = d["wrists"][:, hand]
+            wrist = (wr - ball_xy) * rel_scale
+            scale = np.where(np.isfinite(d["scale"]) & (d["scale"] > 1e-4), d["scale"], np.nan)
+            rel = (d["wrists"] - d["centre"][:, None, :]) / scale[:, None, None]
+            vals = np.concatenate([np.ones((n, 1)), court_n, np.clip(body, -3, 3),
+                                   np.isfinite(wr).all(axis=1, keepdims=True).astype(float), np.clip(wrist, -3, 3),
+                                   np.clip(rel[:, hand], -4, 4), np.clip(rel[:, 1 - hand], -4, 4)], axis=1)
+            cols[m] = np.nan_to_num(vals[m], nan=0.0)
+        cols[~ball_seen, 3:5] = 0.0
+        cols[~ball_seen, 6:8] = 0.0
+        out[:, s * P:(s + 1) * P] = cols
     return out
 
 
@@ -170,7 +297,9 @@ def clip_features(ball: BallTrack, n_frames: int, fps: float, config: FeatureCon
     if config.corners:
         parts.append(court_corner_features(camera, court, len(xy)))
     if config.poses:
-        parts.append(pose_features(players, n_frames, fps, config.ref_fps, config.players)[: len(xy)])
+        native = player_features(players, dense_xy(ball, n_frames), court, config.rel_scale)
+        src = np.clip(np.round(np.arange(len(xy)) * fps / (config.ref_fps or fps)).astype(int), 0, n_frames - 1)
+        parts.append(native[src])
     feats = np.concatenate(parts, axis=1).astype(np.float32)
     assert feats.shape[1] == config.n_features
     return feats

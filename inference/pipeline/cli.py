@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-STAGE_NAMES = ("camera", "shots", "detect", "smooth", "events", "players", "reconstruct")
+STAGE_NAMES = ("camera", "shots", "detect", "smooth", "players", "events", "reconstruct")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -4,8 +4,10 @@ Each stage declares the files it reads (its *inputs*, fingerprinted for resuming
 files it writes. A stage that cannot run says why: :class:`Skip` (an optional input is absent — e.g. no
 calibration, no pose backend) or :class:`StageError` (bad input: the message names the file and the fix).
 
-Order: camera → detect → smooth → events → players → reconstruct. The camera comes first because it is
-cheap and a calibration that does not fit the video must stop the run before the expensive detection.
+Order: camera → detect → smooth → players → events → reconstruct. The camera comes first because it is
+cheap and a calibration that does not fit the video must stop the run before the expensive detection; the
+players come before the events so that a player-aware event model can read them (without players, or
+with ``--pose none``, the events stage uses the ball-only model).
 """
 from __future__ import annotations
 
@@ -294,24 +296,23 @@ def _events_run(ctx: Context) -> Outcome:
         raise StageError(f"the hit-event model is unavailable ({e})") from e
     clip = ctx.clip
     camera = clip.read_camera() if clip.camera_path.is_file() else None
-    players = clip.read_players(missing_ok=True) if clip.players_path.is_file() else None
+    players = _players_for_events(ctx)
     if ctx.cfg.events is not None and not Path(ctx.cfg.events).is_file():
         raise StageError(f"{ctx.cfg.events}: hit-event checkpoint not found — pass an existing file with --events")
-    det = EventDetector.from_checkpoint(ctx.cfg.events, sport=clip.info.sport)
+    det = EventDetector.from_checkpoint(_events_weights(ctx), sport=clip.info.sport)
     frames = clip.frames(cache_size=16)
     spans = _court_spans(ctx)
     try:
+        pl = players if det.wants_players else None
         if spans is None:
             result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
-                                 players=players if players is not None and len(players) else None, frames=frames,
-                                 keep_all=not ctx.cfg.rally_only)
+                                 players=pl, frames=frames, keep_all=not ctx.cfg.rally_only)
         else:  # a broadcast clip: each court-view shot on its own, no event window across a cut
             from .per_shot import events_per_shot
 
             result = events_per_shot(det, clip.read_ball(), spans, clip.n_frames, clip.info.fps, clip.info.width,
-                                     clip.info.height, camera=camera,
-                                     players=players if players is not None and len(players) else None,
-                                     frames=frames, keep_all=not ctx.cfg.rally_only)
+                                     clip.info.height, camera=camera, players=pl, frames=frames,
+                                     keep_all=not ctx.cfg.rally_only)
     finally:
         frames.close()
     clip.write_events(result.events)
@@ -322,8 +323,10 @@ def _events_run(ctx: Context) -> Outcome:
     if not len(result.events):
         raise StageError(f"{clip.ball_path}: no hit events found, so the flights cannot be cut — check ball.csv "
                          "(label or re-detect the ball) or pass another --events model")
+    model = ("player-aware" if players is not None else "player-aware, no players") if det.wants_players \
+        else "ball only"
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
-                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")" +
+                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + f"; {model})" +
                    (f" in {len(spans)} court-view shots" if spans is not None else ""))
 
 
@@ -336,11 +339,34 @@ def _write_rally(clip, result) -> None:
                          list(zip(result.outside.frame.tolist(), result.outside.event.tolist())))
 
 
-def _events_weights(ctx: Context) -> Path:
-    """The hit-event model file the stage will load (so a new shipped model invalidates the cache)."""
-    from inference.events.detector import default_weights
+def _players_for_events(ctx: Context):
+    """The clip's players for the events stage (None when absent, empty or unreadable: ball only)."""
+    from inference.clipio import FormatError
 
-    return Path(ctx.cfg.events) if ctx.cfg.events is not None else default_weights(ctx.clip.info.sport)
+    if not ctx.clip.players_path.is_file():
+        return None
+    try:
+        players = ctx.clip.read_players(missing_ok=True)
+    except (FormatError, ValueError, OSError):
+        return None
+    return players if len(players) else None
+
+
+def _events_weights(ctx: Context) -> Path:
+    """The hit-event model file the stage will load (so a new shipped model invalidates the cache): ``--events``,
+    else the shipped player-aware model when players were found and one is shipped, else the ball-only one."""
+    from inference.events.detector import choose_weights
+
+    return choose_weights(ctx.cfg.events, ctx.clip.info.sport, _players_for_events(ctx))
+
+
+def _events_inputs(ctx: Context) -> dict[str, Path | None]:
+    from inference.events.detector import model_wants_players
+
+    weights = _events_weights(ctx)
+    players = ctx.clip.players_path if model_wants_players(weights) else None  # read only by player-aware models
+    return {"ball": ctx.clip.ball_path, "camera": ctx.clip.root / "camera.yaml", "weights": weights,
+            "players": players, "shots": _shots_path(ctx)}
 
 
 # ------------------------------------------------------------------------------------------ players
@@ -365,6 +391,12 @@ def _players_run(ctx: Context) -> Outcome:
     players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig())
     clip.write_players(players)
     return Outcome(len(poses), f"{len(players.ids())} players")
+
+
+def _players_outputs(ctx: Context) -> list[Path]:
+    """players.csv, except with ``--pose none``: the stage writes nothing, and a players.csv the user brought
+    (another tool's) is read by the events and reconstruct stages."""
+    return [] if ctx.cfg.pose == "none" else [ctx.clip.players_path]
 
 
 # -------------------------------------------------------------------------------------- reconstruct
@@ -431,13 +463,11 @@ def build_stages() -> list[Stage]:
               lambda ctx: [ctx.detected_path], _detect_run),
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
-        Stage("events", lambda ctx: {"ball": ctx.clip.ball_path, "camera": camera(ctx),
-                                     "weights": _events_weights(ctx), "shots": _shots_path(ctx)},
-              lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
+        Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
+              lambda ctx: {"pose": ctx.cfg.pose}, _players_outputs, _players_run),
+        Stage("events", _events_inputs, lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),
-        Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
-              lambda ctx: {"pose": ctx.cfg.pose}, lambda ctx: [ctx.clip.players_path], _players_run),
         Stage("reconstruct", lambda ctx: {"ball": ctx.clip.ball_path, "events": ctx.clip.events_path,
                                           "camera": camera(ctx), "players": ctx.clip.players_path,
                                           "camera_track": _camera_track_path(ctx), "shots": _shots_path(ctx)},

@@ -12,7 +12,7 @@ Sources of clips (``EventDataModule``):
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import lightning as L
@@ -27,6 +27,7 @@ from inference.events.features import (FeatureConfig, clip_features, make_window
                                        window_starts)
 
 from .degrade import DegradeConfig, degrade_all
+from .pose_noise import PoseNoiseConfig, noisy_all
 from .simulate import SimClip, simulate_clips
 
 log = logging.getLogger(__name__)
@@ -58,20 +59,23 @@ def ref_labels(sim: SimClip, class_set: ClassSet, features: FeatureConfig, n_ref
 
 def label_clips(clips: list[SimClip], class_set: ClassSet, features: FeatureConfig,
                 on_unmapped: str = "error") -> list[LabelledClip]:
+    """Features (with each clip's ``players`` when ``features.poses``) and reference-rate labels."""
     court = load_court(class_set.sport) if class_set.sport else None
     out = []
     for c in clips:
-        feats = clip_features(c.ball, c.n_frames, c.fps, features, camera=c.camera, court=court)
+        feats = clip_features(c.ball, c.n_frames, c.fps, features, camera=c.camera, court=court, players=c.players)
         out.append(LabelledClip(c, feats, ref_labels(c, class_set, features, len(feats), on_unmapped)))
     return out
 
 
-def with_tracks(clips: list[LabelledClip], tracks, features: FeatureConfig, court=None) -> list[LabelledClip]:
-    """The same clips and labels with other ball tracks (e.g. degraded ones): features recomputed."""
+def with_tracks(clips: list[LabelledClip], tracks, features: FeatureConfig, court=None,
+                players=None) -> list[LabelledClip]:
+    """The same clips and labels with other ball tracks (e.g. degraded ones), and other players when
+    ``players`` (one per clip) is given: features recomputed."""
     out = []
-    for lc, track in zip(clips, tracks):
-        s = lc.sim
-        feats = clip_features(track, s.n_frames, s.fps, features, camera=s.camera, court=court)
+    for k, (lc, track) in enumerate(zip(clips, tracks)):
+        s = lc.sim if players is None else replace(lc.sim, players=players[k])
+        feats = clip_features(track, s.n_frames, s.fps, features, camera=s.camera, court=court, players=s.players)
         out.append(LabelledClip(s, feats, lc.y))
     return out
 
@@ -82,8 +86,9 @@ def clips_from_folder(root, split: str, seed: int = 0, sources=None) -> list[Sim
     return [c for c, _ in clips_with_source(root, split, seed, sources)]
 
 
-def clips_with_source(root, split: str, seed: int = 0, sources=None) -> list[tuple[SimClip, int]]:
-    """:func:`clips_from_folder` with the index of the root each clip comes from."""
+def clips_with_source(root, split: str, seed: int = 0, sources=None, players: bool = False) -> list[tuple[SimClip, int]]:
+    """:func:`clips_from_folder` with the index of the root each clip comes from (``players``: read each
+    clip's players.csv, else gt/players.csv, when there is one)."""
     from training.datasets import resolve_sources, skip_unlabelled
 
     out = []
@@ -94,11 +99,11 @@ def clips_with_source(root, split: str, seed: int = 0, sources=None) -> list[tup
         if len(labelled) < len(clips):
             log.warning("%s (%s): %d clip(s) without events.csv skipped (events not labelled yet): %s", src.root,
                         split, len(clips) - len(labelled), ", ".join(c.root.name for c in clips if c not in labelled))
-        out += [(_sim_clip(c), k) for c in labelled]
+        out += [(_sim_clip(c, players), k) for c in labelled]
     return out
 
 
-def _sim_clip(clip: Clip) -> SimClip:
+def _sim_clip(clip: Clip, with_players: bool = False) -> SimClip:
     info = clip.info
     ball = clip.read_ball()
     n = info.n_frames or (clip.n_frames if (clip.root / info.video).exists() else None)
@@ -112,7 +117,15 @@ def _sim_clip(clip: Clip) -> SimClip:
             break
         except (FileNotFoundError, OSError, FormatError):
             continue
-    return SimClip(str(clip.root), float(info.fps), int(info.width), int(info.height), n, ball, events, camera)
+    players = None
+    for gt in (False, True) if with_players else ():  # the clip's players.csv (a pose backend's), else gt/
+        try:
+            players = clip.read_players(gt=gt)
+            break
+        except (FileNotFoundError, OSError, FormatError):
+            continue
+    return SimClip(str(clip.root), float(info.fps), int(info.width), int(info.height), n, ball, events, camera,
+                   players=players)
 
 
 # ------------------------------------------------------------------------------------------- windows
@@ -207,9 +220,26 @@ def position_columns(features: FeatureConfig) -> list[tuple[int, int]]:
     if features.corners:
         pairs += [(base + 2 * k, base + 2 * k + 1) for k in range(4)]
         base += 8
-    if features.poses:
-        pairs += [(base + 2 * k, base + 2 * k + 1) for k in range(17 * features.players)]
     return pairs
+
+
+def player_offset_columns(features: FeatureConfig) -> tuple[list[tuple[int, int]], list[int], list[int]]:
+    """Columns of the ``poses`` block: (x, y) pairs of image offsets (rotate and mirror with the image),
+    the court-x columns (mirror) and the ball-relative columns (zeroed where the ball is dropped)."""
+    if not features.poses:
+        return [], [], []
+    from inference.events.features import PLAYER_COLUMNS, SIDES
+
+    col = {n: i for i, n in enumerate(PLAYER_COLUMNS)}
+    pairs, court_x, ball_rel = [], [], []
+    for s in range(len(SIDES)):
+        o = features.player_offset + s * len(PLAYER_COLUMNS)
+        pairs += [(o + col[a], o + col[b]) for a, b in (("body_dx", "body_dy"), ("wrist_dx", "wrist_dy"),
+                                                         ("racket_wrist_x", "racket_wrist_y"),
+                                                         ("other_wrist_x", "other_wrist_y"))]
+        court_x.append(o + col["court_x"])
+        ball_rel += [o + col[n] for n in ("body_dx", "body_dy", "wrist_dx", "wrist_dy")]
+    return pairs, court_x, ball_rel
 
 
 def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg: AugmentConfig,
@@ -239,6 +269,11 @@ def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg
         x[:, :, [cx, cy]] = torch.where(known, q, p)
     if features.velocity:
         x[:, :, 2:4] = torch.einsum("bij,bwj->bwi", A, x[:, :, 2:4])
+    offsets, court_x, ball_rel = player_offset_columns(features)
+    for cx, cy in offsets:  # image offsets: rotated and mirrored, never translated
+        x[:, :, [cx, cy]] = torch.einsum("bij,bwj->bwi", A, x[:, :, [cx, cy]])
+    if court_x:  # a mirrored image is the court seen mirrored
+        x[:, :, court_x] = torch.where(mirror[:, None, None], -x[:, :, court_x], x[:, :, court_x])
     y = torch.where(mirror, mirror_perm[y], y)
     # drops and corruptions of the ball columns (vectorised: a (B, W) mask of affected frames)
     names = [OPS[int(o)] for o in op]
@@ -251,7 +286,7 @@ def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg
         is_frac[:, None] & (torch.rand(B, W, generator=gen) < cfg.frac))
     drop = rows & is_drop[:, None]
     corrupt = rows & ~is_drop[:, None]
-    x[:, :, ball_cols] = torch.where(drop[..., None], 0.0, x[:, :, ball_cols])
+    x[:, :, ball_cols + ball_rel] = torch.where(drop[..., None], 0.0, x[:, :, ball_cols + ball_rel])
     x[:, :, 0:2] = torch.where(corrupt[..., None], 1.0 + torch.rand(B, W, 2, generator=gen), x[:, :, 0:2])
     if features.velocity:
         x[:, :, 2:4] = torch.where(corrupt[..., None], torch.randn(B, W, 2, generator=gen) * 0.1, x[:, :, 2:4])
@@ -276,6 +311,9 @@ class EventDataModule(L.LightningDataModule):
         degrade: :class:`~training.events.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
+        pose_noise: :class:`~training.events.pose_noise.PoseNoiseConfig` fields: with ``features.poses``,
+            the players as a pose backend gives them (misses, jitter, swaps; a new draw each epoch for
+            training, a fixed one for val and test); None or ``enabled: false`` keeps them exact.
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
@@ -284,7 +322,7 @@ class EventDataModule(L.LightningDataModule):
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
                  degrade: dict | None = None, root_weights: list[float] | None = None,
-                 split_seed: int | None = None, around: float = 0.0):
+                 split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -306,7 +344,9 @@ class EventDataModule(L.LightningDataModule):
         self.batch_size, self.num_workers, self.cache_dir = batch_size, num_workers, cache_dir
         self.augment = AugmentConfig(**(augment or {}))
         self.degrade = DegradeConfig.from_dict(degrade)
+        self.pose_noise = PoseNoiseConfig.from_dict(pose_noise)
         self._draw = 0  # degradation draws of the training split so far
+        self._exact: dict[str, list[SimClip]] = {}  # per split: the clips with their exact players
         self.clips: dict[str, list[LabelledClip]] = {}
         self.sets: dict[str, WindowSet] = {}
 
@@ -321,21 +361,24 @@ class EventDataModule(L.LightningDataModule):
 
     def raw_clips(self, split: str) -> list[SimClip]:
         if self.source == "folder":
-            pairs = clips_with_source(self.root, split, self.split_seed, self.sources)
+            pl = self.features.poses
+            pairs = clips_with_source(self.root, split, self.split_seed, self.sources, pl)
             if not pairs and split == "val":
                 log.warning("no labelled validation clips: tuning and checkpointing on the training clips "
                             "(optimistic); give the dataset a val split for an honest one")
-                pairs = clips_with_source(self.root, "train", self.split_seed, self.sources)
+                pairs = clips_with_source(self.root, "train", self.split_seed, self.sources, pl)
             clips = [c for c, _ in pairs]
             self.clip_source[split] = [k for _, k in pairs]
         else:
             offset = {"train": 0, "val": 1, "test": 2}[split]
             n = self.counts[split]
             n_around = int(round(self.around * n))
-            clips = simulate_clips(self.sport, n - n_around, self.seed * 10 + offset, self.cache_dir) if n > n_around \
-                else []
+            pl = self.features.poses  # players articulated and projected only when the model reads them
+            clips = simulate_clips(self.sport, n - n_around, self.seed * 10 + offset, self.cache_dir,
+                                   players=pl) if n > n_around else []
             if n_around:  # rallies with the server's bounces before the serve and the ball after the point
-                clips += simulate_clips(self.sport, n_around, self.seed * 10 + offset + 5, self.cache_dir, around=True)
+                clips += simulate_clips(self.sport, n_around, self.seed * 10 + offset + 5, self.cache_dir, around=True,
+                                        players=pl)
         return clips
 
     def labelled(self, split: str) -> list[LabelledClip]:
@@ -343,6 +386,9 @@ class EventDataModule(L.LightningDataModule):
             raw = self.raw_clips(split)
             if not raw:
                 raise ValueError(f"the {split} split of {self.root or 'the synthetic data'} has no clips")
+            self._exact[split] = raw
+            if self.features.poses:  # the players as a pose backend would give them (a fixed draw per split)
+                raw = [replace(c, players=p) for c, p in zip(raw, self.players_draw(split, raw, 0))]
             self.clips[split] = label_clips(raw, self.class_set, self.features, self.on_unmapped)
             n_ev = sum(int((c.y > 0).sum()) for c in self.clips[split])
             if n_ev == 0:
@@ -350,13 +396,24 @@ class EventDataModule(L.LightningDataModule):
                             "from it", split, self.class_set.name)
         return self.clips[split]
 
+    def players_draw(self, split: str, sims: list[SimClip], draw: int) -> list:
+        """Noisy players of ``sims`` (:mod:`.pose_noise`; a fixed seed per split and draw)."""
+        offset = {"train": 0, "val": 1, "test": 2}[split]
+        return noisy_all(sims, (self.seed * 10 + offset) * 1000 + 500 + draw, self.pose_noise)
+
     def degraded(self, split: str, draw: int = 0) -> list[LabelledClip]:
-        """The clips of ``split`` with degraded tracks (draw ``draw``: a fixed seed per split and draw)."""
+        """The clips of ``split`` with degraded tracks (draw ``draw``: a fixed seed per split and draw); with
+        ``features.poses`` and a draw > 0, new noisy players too."""
         clips = self.labelled(split)
         offset = {"train": 0, "val": 1, "test": 2}[split]
         seed = (self.seed * 10 + offset) * 1000 + draw
         court = load_court(self.class_set.sport) if self.class_set.sport else None
-        return with_tracks(clips, degrade_all([c.sim for c in clips], seed, self.degrade), self.features, court)
+        players = None
+        if self.features.poses and draw > 0:
+            players = self.players_draw(split, self._exact[split], draw)
+        return with_tracks(clips, degrade_all([c.sim for c in clips], seed, self.degrade), self.features, court,
+                           players)
+
 
     def tuning_clips(self) -> tuple[list[SimClip], list]:
         """Validation clips and their tracks for temperature and decoder tuning: the annotated tracks, plus
@@ -394,7 +451,8 @@ class EventDataModule(L.LightningDataModule):
         if int((ds.y > 0).sum()) == 0:
             raise ValueError("the training split has no events: nothing to learn (check events.csv and the "
                              f"class set {self.class_set.name})")
-        redraw = self.redraw if self.degrade.enabled and self.degrade.every_epoch else None
+        noisy_poses = self.features.poses and self.pose_noise.enabled
+        redraw = self.redraw if (self.degrade.enabled and self.degrade.every_epoch) or noisy_poses else None
         return DataLoader(ds, batch_size=self.batch_size,
                           sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed, on_epoch=redraw,
                                                   weights=self.window_weights()),

@@ -115,14 +115,19 @@ class DegradeConfig:
 
     @classmethod
     def from_dict(cls, d) -> DegradeConfig:
-        if isinstance(d, DegradeConfig):
-            return d
-        d = dict(d or {"enabled": False})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown data.degrade keys {unknown}; known: {sorted(known)}")
-        return cls(**d)
+        return config_from_dict(cls, d, "data.degrade")
+
+
+def config_from_dict(cls, d, key: str):
+    """``cls`` from a config mapping (None: ``enabled: false``); unknown keys are an error naming ``key``."""
+    if isinstance(d, cls):
+        return d
+    d = dict(d or {"enabled": False})
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(d) - known)
+    if unknown:
+        raise ValueError(f"unknown {key} keys {unknown}; known: {sorted(known)}")
+    return cls(**d)
 
 
 @dataclass

@@ -100,8 +100,9 @@ def fit_temperature(logits: torch.Tensor, labels: torch.Tensor, iters: int = 200
 
 
 def detector_scorer(det: EventDetector) -> Scorer:
-    """A scorer from a runtime detector (HitNet or physics)."""
-    return lambda sim, track: det.ref_probs(track, sim.n_frames, sim.fps, camera=sim.camera)
+    """A scorer from a runtime detector (HitNet or physics); player-aware models read ``sim.players``."""
+    return lambda sim, track: det.ref_probs(track, sim.n_frames, sim.fps, camera=sim.camera,
+                                            players=getattr(sim, "players", None))
 
 
 def labels_at_ref(sim: SimClip, class_set: ClassSet, features: FeatureConfig, n_ref: int) -> np.ndarray:

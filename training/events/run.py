@@ -157,7 +157,7 @@ def init_events(module, path: str | Path, dm: EventDataModule | None = None) -> 
         wanted = {"data.window": blob.get("window"), "data.last_k": blob.get("last_k"),
                   "data.class_set": blob["class_set"].get("name")}
         have = {"data.window": dm.window, "data.last_k": dm.last_k, "data.class_set": dm.class_set.name}
-        feats = FeatureConfig.from_dict(blob["features"]).to_dict()
+        feats = FeatureConfig.from_model_file(blob["features"]).to_dict()
         wanted.update({f"data.features.{k}": v for k, v in feats.items()})
         have.update({f"data.features.{k}": v for k, v in dm.features.to_dict().items()})
         diff = [f"{k}={wanted[k]}" for k in wanted if k in have and wanted[k] is not None and wanted[k] != have[k]]

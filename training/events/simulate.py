@@ -22,8 +22,9 @@ import numpy as np
 from tqdm import tqdm
 
 from inference.camera import Camera
-from inference.clipio import BallTrack, HitEvents, private_temp_path
+from inference.clipio import BallTrack, HitEvents, PlayerTracks, private_temp_path
 from inference.court import load_court
+from inference.skeleton import COCO17
 from training.synth.cameras import CameraSpec
 from training.synth.generate import DEFAULT_CAMERA
 from training.synth.groundtruth import event_table, inside_image
@@ -33,7 +34,8 @@ from training.synth.rally import REAL_AROUND, default_config, simulate_rally
 @dataclass
 class SimClip:
     """One simulated clip: ``ball`` (every frame a row), ``events`` (fine labels), ``fps``, image size,
-    ``camera`` (ground truth) and ``name``; ``rally``: (serve frame, dead-ball frame) when known."""
+    ``camera`` (ground truth) and ``name``; ``rally``: (serve frame, dead-ball frame) when known;
+    ``players``: the players as ``players.csv`` would hold them (exact 2D keypoints), when simulated."""
 
     name: str
     fps: float
@@ -44,6 +46,36 @@ class SimClip:
     events: HitEvents
     camera: Camera
     rally: tuple[int, int] | None = None
+    players: PlayerTracks | None = None
+
+
+def project_players(poses, camera: Camera) -> PlayerTracks:
+    """The articulated players (:func:`training.synth.bodies.articulate`) seen by ``camera``, as
+    ``gt/players.csv`` holds them: normalised 2D keypoints (score 1 inside the image and in front of the
+    camera, else missing), boxes of the projected joints, court position under the ankles' midpoint, team."""
+    size = np.asarray(camera.image_size, float)
+    ankles = [COCO17.index("left_ankle"), COCO17.index("right_ankle")]
+    cols = {k: [] for k in ("frame", "pid", "team", "bbox", "kp", "court")}
+    for pose in poses:
+        n = pose.n_frames
+        j = pose.joints.reshape(-1, 3)
+        uv = (camera.project(j) / size).reshape(n, 17, 2)
+        ok = (camera.depth(j) > 0.1).reshape(n, 17) & (uv >= 0).all(axis=2) & (uv <= 1).all(axis=2)
+        uv[~ok] = np.nan
+        lo, hi = np.nanmin(np.where(ok[..., None], uv, np.inf), axis=1), np.nanmax(np.where(ok[..., None], uv, -np.inf), axis=1)
+        box = np.concatenate([lo, hi], axis=1)
+        box[~ok.any(axis=1)] = np.nan
+        cols["frame"].append(np.arange(n))
+        cols["pid"].append(np.full(n, pose.player_id))
+        cols["team"] += [pose.team] * n
+        cols["bbox"].append(box)
+        cols["kp"].append(np.concatenate([uv, np.where(ok, 1.0, np.nan)[..., None]], axis=2))
+        cols["court"].append(pose.joints[:, ankles, :2].mean(axis=1))
+    frame = np.concatenate(cols["frame"])
+    order = np.lexsort((np.concatenate(cols["pid"]), frame))
+    cat = lambda k: np.concatenate(cols[k])[order]  # noqa: E731
+    return PlayerTracks(frame[order], cat("pid"), [cols["team"][i] for i in order], np.ones(len(frame)),
+                        cat("bbox"), cat("kp"), cat("court"))
 
 
 def project_track(rally, camera: Camera) -> BallTrack:
@@ -65,10 +97,12 @@ def project_track(rally, camera: Camera) -> BallTrack:
     return BallTrack(np.arange(n), vis, np.clip(xy, 0, 1))
 
 
-def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: float | None = None) -> SimClip:
+def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: float | None = None,
+                  players: bool = False) -> SimClip:
     """One rally with a randomised camera; the same seed gives the same clip. ``around``: add the
     server's bounces before the serve and the ball after the point (not events; ``rally`` marks the
-    point); ``fps``: fix the frame rate."""
+    point); ``fps``: fix the frame rate; ``players``: articulate the players (they swing at their hits)
+    and keep their exact 2D poses in ``SimClip.players`` (own random stream: the rest is unchanged)."""
     court = court or load_court(sport)
     r_cam, r_rally = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     spec = CameraSpec.preset(DEFAULT_CAMERA[sport]).randomised(r_cam)
@@ -79,26 +113,33 @@ def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: 
     if around:
         config = replace(config, around=REAL_AROUND)
     rally = simulate_rally(court, spec.fps, r_rally, sport=sport, config=config)
+    tracks = None
+    if players:
+        from training.synth.bodies import articulate
+
+        r_body = np.random.default_rng([seed, 31])
+        tracks = project_players([articulate(p, spec.fps, r_body, sport=sport) for p in rally.players], camera)
     return SimClip(f"{sport}_{seed}", spec.fps, spec.width, spec.height, rally.n_frames,
-                   project_track(rally, camera), event_table(rally), camera, rally.rally_frames())
+                   project_track(rally, camera), event_table(rally), camera, rally.rally_frames(), tracks)
 
 
 def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None = None,
-                   progress: bool = True, around: bool = False, fps: float | None = None) -> list[SimClip]:
+                   progress: bool = True, around: bool = False, fps: float | None = None,
+                   players: bool = False) -> list[SimClip]:
     """``n`` clips with seeds ``seed * 1_000_003 + k``; cached as a pickle under ``cache_dir``
-    (``around``, ``fps``: see :func:`simulate_clip`)."""
+    (``around``, ``fps``, ``players``: see :func:`simulate_clip`)."""
     if n <= 0:
         raise ValueError(f"need at least one clip, got n={n}")
     cache = None
     if cache_dir is not None:
-        parts = [sport, n, seed, 1] + ([around, fps] if around or fps else [])
+        parts = [sport, n, seed, 1] + ([around, fps] if around or fps else []) + (["players"] if players else [])
         key = hashlib.sha1(json.dumps(parts).encode()).hexdigest()[:10]
         cache = Path(cache_dir) / f"sim_{sport}_{n}_{seed}_{key}.pkl"
         if cache.is_file():
             with open(cache, "rb") as fh:
                 return pickle.load(fh)
     court = load_court(sport)
-    clips = [simulate_clip(sport, seed * 1_000_003 + k, court, around, fps)
+    clips = [simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players)
              for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
