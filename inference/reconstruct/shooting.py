@@ -91,6 +91,8 @@ class ShootingConfig:
     court_sigma: float = 0.01         # m, hinge on a frame below the floor or through a wall
     net_sigma: float = 0.02           # m
     limit_sigma: float = 0.05         # m, hinge of the hit-height range
+    free_end_speed_sigma: float = 8.0  # m/s, Student-t pull of a free end's velocity towards rest (a toss or a
+    #                                    rolling ball; its motion along the line of sight is otherwise unseen)
     fit_spin: bool = True
     fit_drag: bool = False
     drag_sigma: float = 0.2
@@ -509,6 +511,7 @@ class Problem:
             self._court(fl, taus, rows, through)
         self._net(fl, taus, rows, through)
         self._hits(theta, rows)
+        self._free_ends(theta, rows)
 
         # contact-time prior, spin and drag priors
         tau_idx = np.array([ct.tau for ct in ch.contacts])
@@ -702,6 +705,20 @@ class Problem:
             if viol:
                 rows.add(np.array([viol / cfg.limit_sigma]),
                          lambda idx=idx: [(idx[2:3][None, :], np.array([[1.0 / cfg.limit_sigma]]))])
+
+    def _free_ends(self, theta: np.ndarray, rows: _Rows) -> None:
+        """Free ends (lead-in, run-out): a heavy-tailed (Student-t) pull of the velocity at the contact towards
+        rest. The 2D track pins a free end's motion across the line of sight but hardly along it (a serve's toss
+        seen from behind); a fast free end that the track does explain costs little."""
+        sig = self.cfg.free_end_speed_sigma
+        if not sig:
+            return
+        for f in self.chain.flights:
+            if f.end is not None:
+                continue
+            idx = np.array(f.vel)
+            rho, d = student_t(theta[idx] / sig, self.hit_prior.dof)
+            rows.add(rho, lambda d=d, idx=idx: [(idx[None, :].repeat(3, 0), np.diag(d / sig))])
 
     def reweight(self) -> None:
         """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
