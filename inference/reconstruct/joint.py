@@ -13,7 +13,8 @@ another event class, no contact at all — and the best hypothesis is kept when 
 still does not fit is reported failed with its reason, and its frames no longer pull its neighbours.
 
 Per-frame 3×3 covariances come from the Gauss-Newton covariance of all unknowns (2D noise, contact times
-and the hitter prior included).
+and the hitter prior included), calibrated per sport (the court YAML's ``uncertainty``: a scale and an
+along-ray model error growing with the time from the nearest contact; :class:`.shooting.Uncertainty`).
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ from inference.physics import FlightModel
 from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, contact_priors, nearest_observed
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
-from .shooting import Chain, HitPrior, Problem, ShootingConfig, build_chain, frame_covariances, net_height, solve
+from .shooting import (Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain, frame_covariances, net_height,
+                       solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
 
@@ -47,8 +49,9 @@ class JointConfig(ShootingConfig):
     refit: bool = True                # try other contact hypotheses for flights that do not fit
     max_refits: int = 8               # flights examined per rally
     max_hypotheses: int = 16          # rally fits tried in all by the refits (each is a whole fit)
-    sigma_inflation: float = 1.0      # covariance scale for what the model leaves out (bench/bench_joint.py)
-    sigma_floor_m: float = 0.003      # isotropic m added to every frame's σ
+    sigma_inflation: float = 1.0      # extra covariance scale on top of the court YAML's `uncertainty`
+    sigma_floor_m: float = 0.0        # extra isotropic m added to every frame's σ (the court's floor_m first)
+    uncertainty: Uncertainty | None = None  # covariance calibration (None: the court YAML's `uncertainty`)
     max_sigma_m: float = 3.0          # a flight whose median σ exceeds this is reported failed
     max_speed_ms: float = 75.0        # a flight launched faster (270 km/h; records are ~263) is implausible
 
@@ -461,7 +464,8 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
     """The reported flights from the fitted chain (frames, positions, covariances, contacts, checks)."""
     pb, sol = fit.problem, fit.sol
     ch = pb.chain
-    frames, xyz, own, cov = frame_covariances(pb, sol, cfg.sigma_inflation, cfg.sigma_floor_m)
+    frames, xyz, own, cov = frame_covariances(pb, sol, cfg.sigma_inflation, cfg.sigma_floor_m,
+                                              cfg.uncertainty or Uncertainty.from_court(obs.court))
     theta = sol.theta
     checks = fit.checks
     by_event = {c.event: k for k, c in enumerate(fit.plan.contacts) if c.event is not None}
