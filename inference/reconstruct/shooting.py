@@ -735,18 +735,20 @@ class Problem:
                          lambda idx=idx: [(idx[2:3][None, :], np.array([[1.0 / cfg.limit_sigma]]))])
 
     def _free_ends(self, theta: np.ndarray, rows: _Rows) -> None:
-        """Free ends (lead-in, run-out) and flights leaving the net or a mesh (rebounds the impact model leaves
-        free): a heavy-tailed (Student-t) pull of the velocity at the contact towards rest. The 2D track pins
-        such a flight's motion across the line of sight but hardly along it (a serve's toss seen from behind, a
-        ball dropping off the net towards the camera); a fast flight that the track does explain costs little."""
+        """Lead-ins, run-outs that do not leave a floor/glass bounce, and flights leaving the net or a mesh
+        (rebounds the impact model leaves free): a heavy-tailed (Student-t) pull of the velocity at the contact
+        towards rest. The 2D track pins such a flight's motion across the line of sight but hardly along it (a
+        serve's toss seen from behind, a ball dropping off the net towards the camera); a fast flight that the
+        track does explain costs little."""
         sig = self.cfg.free_end_speed_sigma
         if not sig:
             return
         for f in self.chain.flights:
             ct = self.chain.contacts[f.start]
-            damped = not f.lead_in and ct.kind != "hit" and ct.material is None   # off the net or a mesh
-            if f.end is not None and not damped:
-                continue
+            if not f.lead_in and ct.material is not None:
+                continue           # leaving a floor/glass bounce: the impact model ties it to the incoming flight
+            if f.end is not None and ct.kind == "hit":
+                continue           # between a hit and the next contact: both ends pin it
             idx = np.array(f.vel)
             rho, d = student_t(theta[idx] / sig, self.hit_prior.dof)
             rows.add(rho, lambda d=d, idx=idx: [(idx[None, :].repeat(3, 0), np.diag(d / sig))])
