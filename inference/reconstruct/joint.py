@@ -296,7 +296,10 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     if mute:
         for a, b in mute:
             problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
-    sol = solve(problem, theta)
+    try:
+        sol = solve(problem, theta)
+    except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): this plan fails, not the clip
+        return f"the fit diverged ({e})"
     if mute:  # keep muted frames muted through the reweighting
         for a, b in mute:
             problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
