@@ -32,13 +32,13 @@ def sigma_coverage(clip: Clip, seed: int, shift: int, uncertainty: Uncertainty |
 
 
 def within(c: tuple[float, float]) -> bool:
-    """1-σ coverage within 15 points of the Gaussian 19.9 %, 2-σ within 12 points of 73.9 %."""
-    return abs(c[0] - GAUSS_3D[0]) <= 0.15 and abs(c[1] - GAUSS_3D[1]) <= 0.12
+    """1-σ and 2-σ coverage within 10 points of the Gaussian 19.9 % / 73.9 %."""
+    return abs(c[0] - GAUSS_3D[0]) <= 0.10 and abs(c[1] - GAUSS_3D[1]) <= 0.10
 
 
 def test_padel_covariance_is_calibrated_per_clip():
     """Three noise draws (one with ±2-frame event jitter) of the padel sample, which the calibration (seeds 300+)
-    never saw: each draw's coverage lies near the Gaussian figures; the uncalibrated Gauss-Newton covariance
+    never saw: each draw's coverage lies within 10 points of the Gaussian figures (measured 22–26 % / 68–70 %); the uncalibrated Gauss-Newton covariance
     (scale 1, no model term) is too wide on the same draws (2-σ ellipsoid holding 88–95 % of the frames)."""
     clip = Clip(SAMPLE / "padel_sample")
     cal = [sigma_coverage(clip, seed, 2 if seed == 2 else 0, None) for seed in range(3)]
