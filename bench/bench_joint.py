@@ -13,9 +13,9 @@ Coverage: share of the frames whose 2D ball is in the image (between the first a
 that have a reconstructed 3D position. σ coverage: share of frames whose error lies inside the 1-σ / 2-σ
 ellipsoid of the reported 3×3 covariance; for a 3D Gaussian 19.9 % / 73.9 %.
 
-``--calibrate`` fits the court YAML's ``uncertainty`` (scale, along-ray model error, floor) per sport on clips of
-other seeds (300+ padel, 400+ tennis: never the benchmark's), by the mean per-clip distance of the 1-σ / 2-σ
-coverage from the Gaussian figures, and prints the values to put in conf/court/*.yaml.
+``--calibrate`` fits the court YAML's ``uncertainty`` (scale, along-ray model error, floor) per sport on
+clips of other seeds (300+ padel, 400+ tennis: never the benchmark's), by the mean per-clip distance of the
+1-σ / 2-σ coverage from the Gaussian figures, and prints the values to put in conf/court/*.yaml.
 """
 from __future__ import annotations
 
@@ -45,8 +45,8 @@ RAW = Uncertainty(scale=1.0, model_m_per_s=0.0, floor_m=0.0)
 
 
 def clip_figures(clip, setting: Setting, uncertainty: Uncertainty | None = None) -> dict:
-    """One clip: errors, contact errors, coverage, σ coverage, plausibility, CPU time (and, for calibration, the
-    error vectors, covariances, lines of sight and times from the nearest event)."""
+    """One clip: errors, contact errors, coverage, σ coverage, plausibility, CPU time (and, for calibration,
+    the error vectors, covariances, lines of sight and times from the nearest event)."""
     obs, gt_frames, gt_xyz = prepare(clip, setting)
     true_events = clip.read_events()
     c0 = time.process_time()
@@ -100,7 +100,8 @@ def coverage_per_clip(rows: list[dict], u: Uncertainty) -> np.ndarray:
     out = []
     for r in rows:
         rr = np.einsum("ni,nj->nij", r["ray"], r["ray"])
-        C = u.scale**2 * r["cov"] + ((u.model_m_per_s * r["dt"]) ** 2)[:, None, None] * rr + u.floor_m**2 * np.eye(3)
+        model = ((u.model_m_per_s * r["dt"]) ** 2)[:, None, None] * rr
+        C = u.scale**2 * r["cov"] + model + u.floor_m**2 * np.eye(3)
         m2 = np.einsum("ni,nij,nj->n", r["d"], np.linalg.inv(C), r["d"])
         out.append((np.mean(m2 <= 1), np.mean(m2 <= 4)))
     return np.array(out)
@@ -108,7 +109,8 @@ def coverage_per_clip(rows: list[dict], u: Uncertainty) -> np.ndarray:
 
 def calibrate(rows: list[dict]) -> tuple[Uncertainty, float]:
     """The grid point of (scale, model_m_per_s, floor_m) with the smallest mean per-clip distance from the
-    Gaussian figures (a clip's distance: the larger of its 1-σ and 2-σ ones); and the worst clip's distance."""
+    Gaussian figures (a clip's distance: the larger of its 1-σ and 2-σ ones); and the worst clip's
+    distance."""
     best = None
     for scale in np.arange(0.2, 1.21, 0.05):
         for model in (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5):
@@ -165,7 +167,8 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path("runs/bench_3d"))
     ap.add_argument("--shift", default="0,2", help="event jitter ±k frames to run (default 0,2)")
     ap.add_argument("--sports", default="padel,tennis")
-    ap.add_argument("--calibrate", action="store_true", help="fit the court YAMLs' `uncertainty` on seeds 300/400")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="fit the court YAMLs' `uncertainty` on seeds 300/400")
     args = ap.parse_args()
     if args.calibrate:
         run_calibration(args)
@@ -193,7 +196,8 @@ def run_calibration(args) -> None:
         before = np.abs(coverage_per_clip(rows, Uncertainty()) - np.array(GAUSS_3D)).max()
         print(f"{sport}: {len(rows)} clip runs; worst per-clip distance from the Gaussian figures "
               f"{before * 100:.0f} points uncalibrated (scale 1, floor 3 mm) → {worst * 100:.0f} calibrated\n"
-              f"  uncertainty: {{scale: {u.scale:g}, model_m_per_s: {u.model_m_per_s:g}, floor_m: {u.floor_m:g}}}",
+              f"  uncertainty: {{scale: {u.scale:g}, model_m_per_s: {u.model_m_per_s:g}, "
+              f"floor_m: {u.floor_m:g}}}",
               flush=True)
 
 

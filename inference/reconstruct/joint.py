@@ -29,8 +29,8 @@ from inference.physics import FlightModel
 from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, contact_priors, nearest_observed
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
-from .shooting import (Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain, frame_covariances, net_height,
-                       solve)
+from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain,
+                       frame_covariances, net_height, solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
 
@@ -219,8 +219,10 @@ def _init_velocities(obs: Observations, chain: Chain, theta: np.ndarray, cfg: Jo
 # ---------------------------------------------------------------------------------------------------
 # Fitting a plan
 # ---------------------------------------------------------------------------------------------------
-def _free_end(obs: Observations, frame: int, direction: int, cfg: JointConfig, limit: int) -> int | None:
-    """The farthest frame of a free end from the event at ``frame`` (None: no usable free end)."""
+def _free_end(obs: Observations, frame: int, direction: int, cfg: JointConfig, limit: int,
+              min_seen: int = 3) -> int | None:
+    """The farthest frame of a free end from the event at ``frame`` (None: no usable free end, fewer than
+    ``min_seen`` 2D points)."""
     if not cfg.free_ends:
         return None
     longest = int(round(cfg.free_end_seconds * obs.fps))
@@ -236,7 +238,13 @@ def _free_end(obs: Observations, frame: int, direction: int, cfg: JointConfig, l
             break
         elif last_seen is None and abs(f - frame) > cfg.free_end_gap:
             break
-    return last_seen if n_seen >= 3 else None
+    return last_seen if n_seen >= min_seen else None
+
+
+def _free_end_min_seen(prior: ContactPrior) -> int:
+    """2D points a free end at this contact needs: one at a floor/glass bounce (the impact model carries the
+    flight on the other side through it), else three."""
+    return 1 if prior.plane is not None and prior.plane.material in BOUNCE_MATERIALS else 3
 
 
 def _warm(theta: np.ndarray, chain: Chain, warm: dict | None) -> None:
@@ -274,8 +282,8 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     """Fit one plan; a string says why it cannot be fitted."""
     priors = [c.prior for c in plan.contacts]
     first, last = priors[0].frame, priors[-1].frame
-    lead = _free_end(obs, first, -1, cfg, 0)
-    tail = _free_end(obs, last, +1, cfg, obs.n_frames - 1)
+    lead = _free_end(obs, first, -1, cfg, 0, _free_end_min_seen(priors[0]))
+    tail = _free_end(obs, last, +1, cfg, obs.n_frames - 1, _free_end_min_seen(priors[-1]))
     if span is not None:  # trimmed free ends
         lead = lead if lead is None else max(lead, span[0])
         tail = tail if tail is None else min(tail, span[1])
@@ -298,7 +306,7 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
             problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
     try:
         sol = solve(problem, theta)
-    except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): this plan fails, not the clip
+    except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): the plan fails
         return f"the fit diverged ({e})"
     if mute:  # keep muted frames muted through the reweighting
         for a, b in mute:

@@ -119,8 +119,8 @@ class ShootingConfig:
     court_sigma: float = 0.01         # m, hinge on a frame below the floor or through a wall
     net_sigma: float = 0.02           # m
     limit_sigma: float = 0.05         # m, hinge of the hit-height range
-    free_end_speed_sigma: float = 8.0  # m/s, Student-t pull towards rest of the velocity of a free end or of a
-    #                                    flight leaving the net/a mesh (its motion along the line of sight is unseen)
+    free_end_speed_sigma: float = 8.0  # m/s, Student-t pull towards rest of a free end's velocity or of a
+    #                                    flight leaving the net/a mesh (its motion along the ray is unseen)
     fit_spin: bool = True
     fit_drag: bool = False
     drag_sigma: float = 0.2
@@ -736,17 +736,17 @@ class Problem:
 
     def _free_ends(self, theta: np.ndarray, rows: _Rows) -> None:
         """Lead-ins, run-outs that do not leave a floor/glass bounce, and flights leaving the net or a mesh
-        (rebounds the impact model leaves free): a heavy-tailed (Student-t) pull of the velocity at the contact
-        towards rest. The 2D track pins such a flight's motion across the line of sight but hardly along it (a
-        serve's toss seen from behind, a ball dropping off the net towards the camera); a fast flight that the
-        track does explain costs little."""
+        (rebounds the impact model leaves free): a heavy-tailed (Student-t) pull of the velocity at the
+        contact towards rest. The 2D track pins such a flight's motion across the line of sight but hardly
+        along it (a serve's toss seen from behind, a ball dropping off the net towards the camera); a fast
+        flight that the track does explain costs little."""
         sig = self.cfg.free_end_speed_sigma
         if not sig:
             return
         for f in self.chain.flights:
             ct = self.chain.contacts[f.start]
             if not f.lead_in and ct.material is not None:
-                continue           # leaving a floor/glass bounce: the impact model ties it to the incoming flight
+                continue           # leaving a floor/glass bounce: the impact model ties it to its incoming
             if f.end is not None and ct.kind == "hit":
                 continue           # between a hit and the next contact: both ends pin it
             idx = np.array(f.vel)
@@ -870,7 +870,8 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int) -> Solution:
 # Covariance
 # ---------------------------------------------------------------------------------------------------
 def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0, floor_m: float = 0.0,
-                      calibration: Uncertainty | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                      calibration: Uncertainty | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every frame of the chain: frames (M,), positions (M, 3), owning flights (M,) and 3×3 covariances
     (M, 3, 3) from the Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it
     exceeds 1, times ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and

@@ -1,5 +1,5 @@
-"""The joint method's calibrated covariance (court YAML ``uncertainty``) and free ends the 2D track cannot pin in
-depth (a serve's toss seen from behind the other baseline): kept, not slid along the line of sight."""
+"""The joint method's calibrated covariance (court YAML ``uncertainty``) and free ends the 2D track cannot pin
+in depth (a serve's toss seen from behind the other baseline): kept, not slid along the line of sight."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -37,8 +37,9 @@ def within(c: tuple[float, float]) -> bool:
 
 
 def test_padel_covariance_is_calibrated_per_clip():
-    """Three noise draws (one with ±2-frame event jitter) of the padel sample, which the calibration (seeds 300+)
-    never saw: each draw's coverage lies within 10 points of the Gaussian figures (measured 22–26 % / 68–70 %); the uncalibrated Gauss-Newton covariance
+    """Three noise draws (one with ±2-frame event jitter) of the padel sample, which the calibration (seeds
+    300+) never saw: each draw's coverage lies within 10 points of the Gaussian figures (measured 22–26 % /
+    68–70 %); the uncalibrated Gauss-Newton covariance
     (scale 1, no model term) is too wide on the same draws (2-σ ellipsoid holding 88–95 % of the frames)."""
     clip = Clip(SAMPLE / "padel_sample")
     cal = [sigma_coverage(clip, seed, 2 if seed == 2 else 0, None) for seed in range(3)]
@@ -57,9 +58,9 @@ def test_uncertainty_keys_are_checked():
 
 
 def toss_then_serve() -> tuple[Observations, np.ndarray]:
-    """A far server's toss (straight up and down, 12 frames at 25 fps), the serve at frame 12 and its flight to
-    its bounce in the near service box, seen from behind the near baseline: the toss moves along the line of
-    sight only by its perspective. The server stands 0.4 m behind the toss."""
+    """A far server's toss (straight up and down, 12 frames at 25 fps), the serve at frame 12 and its flight
+    to its bounce in the near service box, seen from behind the near baseline: the toss moves along the
+    line of sight only by its perspective. The server stands 0.4 m behind the toss."""
     court = load_court("tennis")
     model = FlightModel.from_ball(court.ball)
     fps = 25.0
