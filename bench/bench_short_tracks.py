@@ -6,10 +6,11 @@ with the bounce alone (one event).
 
     .venv/bin/python bench/bench_short_tracks.py [--tracks 30] [--seed 0]
 
-The tracks are simulated here (tennis court and ball from conf/court/tennis.yaml): drag, Magnus with
-random topspin or slice, the rigid-ball impact (restitution and friction of the court's floor) at the
-bounce, then 3–8 frames; the first frame is a random phase after the hit. They are not made by
-`rally3d synth` and the reconstruction knows only the court YAML, the camera, the 2D track and the events.
+The tracks are simulated by training/synth/short_tracks.py (tennis court and ball from
+conf/court/tennis.yaml): drag, Magnus with random topspin or slice, the rigid-ball impact (restitution and
+friction of the court's floor) at the bounce, then 3–8 frames; the first frame is a random phase after the
+hit. They are not made by `rally3d synth` and the reconstruction knows only the court YAML, the camera, the
+2D track and the events.
 """
 from __future__ import annotations
 
@@ -24,11 +25,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from inference.camera import Camera  # noqa: E402
 from inference.court import load_court  # noqa: E402
-from inference.physics import FlightModel, bounce, integrate  # noqa: E402
+from inference.physics import FlightModel  # noqa: E402
 from inference.reconstruct import Observations  # noqa: E402
 from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
+from training.synth.short_tracks import FPS, simulate  # noqa: E402
 
-FPS = 25.0
 SIZE = (1280, 720)
 #: (eye, target, horizontal field of view) of the three views
 CAMERAS = {
@@ -36,49 +37,6 @@ CAMERAS = {
     "oblique": ((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), 60.0),
     "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
 }
-
-
-def simulate(rng: np.random.Generator, court, model: FlightModel) -> dict | None:
-    """One hit → bounce → a few frames: positions at the frames (n, 3), the hit and bounce frames."""
-    r = court.ball.radius
-    floor = court.materials["floor"]
-    hit = np.array([rng.uniform(1.5, 9.5), rng.uniform(-1.0, 3.0), rng.uniform(0.5, 1.6)])
-    land = np.array([rng.uniform(1.5, 9.5), rng.uniform(15.0, 22.5)])
-    speed = rng.uniform(15.0, 32.0)
-    d = np.r_[land - hit[:2], 0.0]
-    d /= np.linalg.norm(d)
-    elev = np.radians(rng.uniform(2.0, 14.0))
-    vel = speed * np.r_[np.cos(elev) * d[:2], np.sin(elev)]
-    spin = np.cross([0.0, 0.0, 1.0], d) * rng.uniform(-250.0, 150.0)   # topspin (<0 here) or slice
-    dt = 1.0 / 1000.0
-    s = integrate(hit, vel, spin, 3.0, model, dt=dt)
-    z = s.pos[:, 0, 2]
-    below = np.flatnonzero(z <= r)
-    if not len(below):
-        return None
-    k = int(below[0])
-    net = np.flatnonzero((s.pos[:k, 0, 1] >= court.net_y))
-    if not len(net) or s.pos[net[0], 0, 2] < 0.914 + 3 * r or s.pos[k, 0, 1] > court.size[1] + 2:
-        return None                                          # into the net or far out: not a rally shot
-    t_b = s.t[k]
-    v_out, w_out = bounce(s.vel[k], s.spin[k], np.array([0.0, 0.0, 1.0]), floor.restitution, floor.friction, r)
-    p_b = s.pos[k, 0].copy()
-    p_b[2] = r
-    after = rng.integers(3, 9)
-    t_hit = -rng.uniform(0.0, 1.0 / FPS)                    # the hit between frames −1 and 0 (seconds)
-    last = int(np.floor((t_b + t_hit) * FPS)) + int(after)
-    frames = np.arange(0, last + 1)
-    since = frames / FPS - t_hit                             # seconds since the hit
-    pos = np.empty((len(frames), 3))
-    pre = since <= t_b
-    idx = np.clip(np.round(since[pre] / dt).astype(int), 0, len(s.t) - 1)
-    pos[pre] = s.pos[idx, 0]
-    if (~pre).any():
-        s2 = integrate(p_b, v_out[0], w_out[0], float(since[~pre].max() - t_b) + dt, model, dt=dt)
-        j = np.clip(np.round((since[~pre] - t_b) / dt).astype(int), 0, len(s2.t) - 1)
-        pos[~pre] = s2.pos[j, 0]
-    bounce_frame = int(np.round((t_b + t_hit) * FPS))
-    return {"frames": frames, "xyz": pos, "bounce": bounce_frame, "hit": 0, "after": int(after)}
 
 
 def run(n: int, seed: int, noise: tuple[float, float]) -> None:

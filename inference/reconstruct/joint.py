@@ -13,7 +13,8 @@ another event class, no contact at all — and the best hypothesis is kept when 
 still does not fit is reported failed with its reason, and its frames no longer pull its neighbours.
 
 Per-frame 3×3 covariances come from the Gauss-Newton covariance of all unknowns (2D noise, contact times
-and the hitter prior included).
+and the hitter prior included), calibrated per sport (the court YAML's ``uncertainty``: a scale and an
+along-ray model error growing with the time from the nearest contact; :class:`.shooting.Uncertainty`).
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ from inference.physics import FlightModel
 from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, contact_priors, nearest_observed
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
-from .shooting import Chain, HitPrior, Problem, ShootingConfig, build_chain, frame_covariances, net_height, solve
+from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain,
+                       frame_covariances, net_height, solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
 
@@ -47,8 +49,9 @@ class JointConfig(ShootingConfig):
     refit: bool = True                # try other contact hypotheses for flights that do not fit
     max_refits: int = 8               # flights examined per rally
     max_hypotheses: int = 16          # rally fits tried in all by the refits (each is a whole fit)
-    sigma_inflation: float = 1.0      # covariance scale for what the model leaves out (bench/bench_joint.py)
-    sigma_floor_m: float = 0.003      # isotropic m added to every frame's σ
+    sigma_inflation: float = 1.0      # extra covariance scale on top of the court YAML's `uncertainty`
+    sigma_floor_m: float = 0.0        # extra isotropic m added to every frame's σ (the court's floor_m first)
+    uncertainty: Uncertainty | None = None  # covariance calibration (None: the court YAML's `uncertainty`)
     max_sigma_m: float = 3.0          # a flight whose median σ exceeds this is reported failed
     max_speed_ms: float = 75.0        # a flight launched faster (270 km/h; records are ~263) is implausible
 
@@ -216,8 +219,10 @@ def _init_velocities(obs: Observations, chain: Chain, theta: np.ndarray, cfg: Jo
 # ---------------------------------------------------------------------------------------------------
 # Fitting a plan
 # ---------------------------------------------------------------------------------------------------
-def _free_end(obs: Observations, frame: int, direction: int, cfg: JointConfig, limit: int) -> int | None:
-    """The farthest frame of a free end from the event at ``frame`` (None: no usable free end)."""
+def _free_end(obs: Observations, frame: int, direction: int, cfg: JointConfig, limit: int,
+              min_seen: int = 3) -> int | None:
+    """The farthest frame of a free end from the event at ``frame`` (None: no usable free end, fewer than
+    ``min_seen`` 2D points)."""
     if not cfg.free_ends:
         return None
     longest = int(round(cfg.free_end_seconds * obs.fps))
@@ -233,7 +238,13 @@ def _free_end(obs: Observations, frame: int, direction: int, cfg: JointConfig, l
             break
         elif last_seen is None and abs(f - frame) > cfg.free_end_gap:
             break
-    return last_seen if n_seen >= 3 else None
+    return last_seen if n_seen >= min_seen else None
+
+
+def _free_end_min_seen(prior: ContactPrior) -> int:
+    """2D points a free end at this contact needs: one at a floor/glass bounce (the impact model carries the
+    flight on the other side through it), else three."""
+    return 1 if prior.plane is not None and prior.plane.material in BOUNCE_MATERIALS else 3
 
 
 def _warm(theta: np.ndarray, chain: Chain, warm: dict | None) -> None:
@@ -271,8 +282,8 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     """Fit one plan; a string says why it cannot be fitted."""
     priors = [c.prior for c in plan.contacts]
     first, last = priors[0].frame, priors[-1].frame
-    lead = _free_end(obs, first, -1, cfg, 0)
-    tail = _free_end(obs, last, +1, cfg, obs.n_frames - 1)
+    lead = _free_end(obs, first, -1, cfg, 0, _free_end_min_seen(priors[0]))
+    tail = _free_end(obs, last, +1, cfg, obs.n_frames - 1, _free_end_min_seen(priors[-1]))
     if span is not None:  # trimmed free ends
         lead = lead if lead is None else max(lead, span[0])
         tail = tail if tail is None else min(tail, span[1])
@@ -293,7 +304,10 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     if mute:
         for a, b in mute:
             problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
-    sol = solve(problem, theta)
+    try:
+        sol = solve(problem, theta)
+    except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): the plan fails
+        return f"the fit diverged ({e})"
     if mute:  # keep muted frames muted through the reweighting
         for a, b in mute:
             problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
@@ -462,7 +476,8 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
     """The reported flights from the fitted chain (frames, positions, covariances, contacts, checks)."""
     pb, sol = fit.problem, fit.sol
     ch = pb.chain
-    frames, xyz, own, cov = frame_covariances(pb, sol, cfg.sigma_inflation, cfg.sigma_floor_m)
+    frames, xyz, own, cov = frame_covariances(pb, sol, cfg.sigma_inflation, cfg.sigma_floor_m,
+                                              cfg.uncertainty or Uncertainty.from_court(obs.court))
     theta = sol.theta
     checks = fit.checks
     by_event = {c.event: k for k, c in enumerate(fit.plan.contacts) if c.event is not None}

@@ -76,6 +76,34 @@ class HitPrior:
 
 
 @dataclass(frozen=True)
+class Uncertainty:
+    """How the joint method's per-frame covariance is calibrated (court YAML ``uncertainty``).
+
+    covariance = ``scale``² × the Gauss-Newton covariance + (``model_m_per_s`` × t)² along the line of sight
+    + ``floor_m``² I, with t the time (s) from the frame to the nearest contact. The Gauss-Newton part holds
+    the 2D noise, the contact times and the priors as the fit states them; ``scale`` corrects their stated
+    widths, the along-ray term stands for what the flight model leaves out (drag, spin, the bounce), which the
+    2D track cannot see across the line of sight. Fitted per sport on synthetic clips of seeds that the
+    accuracy benchmark never uses (``bench/bench_joint.py --calibrate``).
+    """
+
+    scale: float = 1.0
+    model_m_per_s: float = 0.0
+    floor_m: float = 0.003
+
+    @classmethod
+    def from_court(cls, court: Court) -> Uncertainty:
+        extra = court.extra.get("uncertainty") or {}
+        unknown = sorted(set(extra) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"{court.source}: unknown uncertainty keys {unknown}")
+        out = cls(**{k: float(v) for k, v in extra.items()})
+        if min(out.scale, out.model_m_per_s, out.floor_m) < 0:
+            raise ValueError(f"{court.source}: uncertainty values must be ≥ 0, got {extra}")
+        return out
+
+
+@dataclass(frozen=True)
 class ShootingConfig:
     """Weights and limits of one chain fit (σ's are the scale of each residual)."""
 
@@ -92,6 +120,8 @@ class ShootingConfig:
     court_sigma: float = 0.01         # m, hinge on a frame below the floor or through a wall
     net_sigma: float = 0.02           # m
     limit_sigma: float = 0.05         # m, hinge of the hit-height range
+    free_end_speed_sigma: float = 8.0  # m/s, Student-t pull towards rest of a free end's velocity or of a
+    #                                    flight leaving the net/a mesh (its motion along the ray is unseen)
     fit_spin: bool = True
     fit_drag: bool = False
     drag_sigma: float = 0.2
@@ -574,6 +604,7 @@ class Problem:
             self._court(fl, taus, rows, through)
         self._net(fl, taus, rows, through)
         self._hits(theta, rows)
+        self._free_ends(theta, rows)
 
         # contact-time prior, spin and drag priors
         tau_idx = np.array([ct.tau for ct in ch.contacts])
@@ -776,6 +807,25 @@ class Problem:
                 rows.add(np.array([viol / cfg.limit_sigma]),
                          lambda idx=idx: [(idx[2:3][None, :], np.array([[1.0 / cfg.limit_sigma]]))])
 
+    def _free_ends(self, theta: np.ndarray, rows: _Rows) -> None:
+        """Lead-ins, run-outs that do not leave a floor/glass bounce, and flights leaving the net or a mesh
+        (rebounds the impact model leaves free): a heavy-tailed (Student-t) pull of the velocity at the
+        contact towards rest. The 2D track pins such a flight's motion across the line of sight but hardly
+        along it (a serve's toss seen from behind, a ball dropping off the net towards the camera); a fast
+        flight that the track does explain costs little."""
+        sig = self.cfg.free_end_speed_sigma
+        if not sig:
+            return
+        for f in self.chain.flights:
+            ct = self.chain.contacts[f.start]
+            if not f.lead_in and ct.material is not None:
+                continue           # leaving a floor/glass bounce: the impact model ties it to its incoming
+            if f.end is not None and ct.kind == "hit":
+                continue           # between a hit and the next contact: both ends pin it
+            idx = np.array(f.vel)
+            rho, d = student_t(theta[idx] / sig, self.hit_prior.dof)
+            rows.add(rho, lambda d=d, idx=idx: [(idx[None, :].repeat(3, 0), np.diag(d / sig))])
+
     def reweight(self) -> None:
         """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
         k = self.cfg.huber_k
@@ -909,18 +959,21 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
 # ---------------------------------------------------------------------------------------------------
 # Covariance
 # ---------------------------------------------------------------------------------------------------
-def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0,
-                      floor_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0, floor_m: float = 0.0,
+                      calibration: Uncertainty | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every frame of the chain: frames (M,), positions (M, 3), owning flights (M,) and 3×3 covariances
     (M, 3, 3) from the Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it
-    exceeds 1, times ``inflation``², plus ``floor_m``² I for what the model leaves out)."""
+    exceeds 1, times ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and
+    along-ray model error), plus ``floor_m``² I."""
+    cal = calibration or Uncertainty(floor_m=0.0)
     fl, taus = sol.aux["flights"], sol.aux["taus"]
     frames, own, j = problem.frame_positions(fl, taus)
     xyz = fl.P[own, 0, j]
     n_obs = 2 * len(problem.frames)
     wr = sol.r[:n_obs]
     dof = max(n_obs - problem.chain.n, 1)
-    s2 = max(float(wr @ wr) / dof, 1.0) * inflation**2
+    s2 = max(float(wr @ wr) / dof, 1.0) * (inflation * cal.scale)**2
     A = (sol.J.T @ sol.J).toarray()
     try:
         cov = np.linalg.pinv(A, hermitian=True) * s2
@@ -930,5 +983,10 @@ def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0,
     Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
     C = problem.cols[own]                                                        # (M, 11)
     sub = cov[C[:, :, None], C[:, None, :]]                                      # (M, 11, 11)
-    out = np.einsum("mdc,mce,mfe->mdf", Jp, sub, Jp) + floor_m**2 * np.eye(3)[None]
+    out = np.einsum("mdc,mce,mfe->mdf", Jp, sub, Jp) + (floor_m**2 + cal.floor_m**2) * np.eye(3)[None]
+    if cal.model_m_per_s:
+        ray = xyz - problem.obs.camera.centre
+        ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
+        t = np.min(np.abs(frames[:, None] - taus[None, :]), axis=1) / problem.fps          # (M,) s
+        out += ((cal.model_m_per_s * t) ** 2)[:, None, None] * np.einsum("mi,mj->mij", ray, ray)
     return frames, xyz, own, out
