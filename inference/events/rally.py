@@ -19,6 +19,7 @@ Example:
 from __future__ import annotations
 
 from dataclasses import dataclass
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +49,15 @@ class RallyParams:
     leave_ratio: float = 1.0
     hit_travel: float = 0.02
     speed_s: float = 0.12
-    speed_ratio: float = 1.5
+    launch_ratio: float = 2.0
+    launch_floor: float = 0.5
+    far_leave: float = 3.0
+    far_ratio: float = 1.0
+    fallback_speed: float = 1.0
+    hold_s: float = 0.2
+    hold_travel: float = 0.004
+    peak_prob: float = 0.3
+    refine_s: float = 0.04
     serve_window_s: float = 1.2
     snap_s: float = 0.15
     serve_bounce: bool = False
@@ -64,7 +73,8 @@ class RallyParams:
         """The sport's constants (tuned on 100 simulated rallies of seed 7007 per sport, ``bench_rally.py``
         reports on others): padel's serve bounces; its far serves and near bounces need a stricter test."""
         if sport == "padel":
-            return cls(serve_bounce=True, leave_ratio=2.0, speed_ratio=3.0)
+            return cls(serve_bounce=True, leave_ratio=2.0, away_s=(0.4, 1.0), far_leave=2.0, far_ratio=0.5,
+                       fallback_speed=0.0)
         if sport == "tennis":
             return cls(hit_travel=0.05)
         return cls()
@@ -182,8 +192,130 @@ def _gap_between(seen: np.ndarray, a: int, b: int, gap: int) -> bool:
     return bool((run >= gap).any())
 
 
+def forward_speed(p: np.ndarray, fps: float) -> np.ndarray:
+    """``(T,)`` image speed leaving each frame, ``|p[t+1] - p[t]| · fps`` (NaN where either is missing)."""
+    v = np.full(len(p), np.nan)
+    if len(p) > 1:
+        v[:-1] = np.linalg.norm(np.diff(p, axis=0), axis=1) * fps
+    return v
+
+
+def launch_scores(p: np.ndarray, fps: float, params: RallyParams) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame ``t``: ``after`` = median image speed over the ``speed_s`` leaving ``t`` and ``ratio`` =
+    ``after`` / the fastest the ball moved in the ``behind_s`` before (at least ``launch_floor`` × the
+    clip's 75th-percentile speed): a serve leaves much faster than any bounce in the hand or toss before
+    it; a return does not leave faster than the serve it answers."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    T = len(p)
+    v = forward_speed(p, fps)
+    k = max(2, int(round(params.speed_s * fps)))
+    b = max(2, int(round(params.behind_s * fps)))
+    after = np.full(T, np.nan)
+    if T >= k:
+        w = sliding_window_view(v, k)
+        n_ok = np.isfinite(w).sum(axis=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(w, axis=1)
+        after[:T - k + 1] = np.where(n_ok >= 2, med, np.nan)
+    pad = np.concatenate([np.full(b, np.nan), v])  # before[t] = max v[t-b .. t-2]
+    w = sliding_window_view(pad, b - 1)[:T]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        before = np.nanmax(w, axis=1)
+        floor = params.launch_floor * (np.nanpercentile(v, 75) if np.isfinite(v).any() else 0.0)
+    ratio = after / np.maximum(np.nan_to_num(before, nan=0.0), max(floor, 1e-6))
+    return np.nan_to_num(ratio, nan=0.0), np.nan_to_num(after, nan=0.0)
+
+
+def held_still(p: np.ndarray, fps: float, params: RallyParams) -> np.ndarray:
+    """``(T,)`` True where the ball moved less than ``hold_travel`` image heights during the ``hold_s``
+    before the frame: it rests in a hand, so what follows is a drop, a throw or a toss, not a serve (a serve
+    meets a falling or rebounding ball)."""
+    T = len(p)
+    n = max(2, int(round(params.hold_s * fps)))
+    moved = np.zeros(T)
+    known = np.zeros(T, int)
+    for s in range(1, min(n, T - 1) + 1):
+        d = np.linalg.norm(p[s:] - p[:-s], axis=1)
+        ok = np.isfinite(d)
+        moved[s:] = np.fmax(moved[s:], np.where(ok, d, 0.0))
+        known[s:] += ok
+    return (known >= n // 2) & (moved < params.hold_travel)
+
+
+def _peaks(x: np.ndarray, lo: float, half: int = 2) -> np.ndarray:
+    """Frames where ``x`` is at least ``lo`` and the largest within ``half`` frames."""
+    from scipy.ndimage import maximum_filter1d
+
+    x = np.nan_to_num(np.asarray(x, float), nan=0.0)
+    return np.flatnonzero((x >= lo) & (x >= maximum_filter1d(x, 2 * half + 1, mode="nearest")))
+
+
+def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float, params: RallyParams,
+               hit_prob: np.ndarray | None = None) -> tuple[int | None, str]:
+    """The serve's frame and where it came from (``hit``: a decoded racket hit, ``model``: a peak of the
+    model's hit probability the decoder dropped, ``track``: the track alone), or ``(None, "none")``.
+
+    Candidates are the decoded hits, the peaks of ``hit_prob`` (``(T,)``, optional) and the track's
+    sharpest velocity changes; a candidate passes when the ball leaves it much faster than it moved before
+    (:func:`launch_scores`) and stays away (:func:`away_and_back`). Of the passing candidates within
+    ``serve_window_s`` of the first, the one the ball leaves fastest (a toss passes too, slower).
+    """
+    T = len(xy)
+    p = _scaled(xy, aspect)
+    ratio, after = launch_scores(p, fps, params)
+    away, back = away_and_back(xy, fps, aspect, params)
+    leaves = away > np.maximum(params.hit_travel, params.leave_ratio * back)
+    launched = ~held_still(p, fps, params) & ((ratio >= params.launch_ratio) | ((ratio >= params.far_ratio) & (away > params.far_leave * np.maximum(back, 1e-6))))
+    near = max(1, int(round(params.refine_s * fps)))
+
+    def passing(t: int) -> int | None:  # the frame near t the ball is launched from, if it passes
+        lo, hi = max(t - near, 0), min(t + near, T - 1)
+        ok = [u for u in range(lo, hi + 1) if launched[u] and leaves[max(u - 1, 0):u + 2].any()]
+        if not ok:
+            return None
+        turn = sharpest_turn(xy, lo, hi, aspect)
+        return turn if turn is not None and lo <= turn <= hi and turn in ok else max(ok, key=lambda u: ratio[u])
+
+    cands: dict[int, str] = {}
+    for h in hit_frames:
+        cands.setdefault(int(h), "hit")
+    if hit_prob is not None and len(hit_prob):
+        for t in _peaks(hit_prob[:T], params.peak_prob):
+            cands.setdefault(int(t), "model")
+    acc = np.zeros(T)
+    if T >= 3:
+        acc[1:-1] = np.nan_to_num(np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=1), nan=0.0)
+    for t in _peaks(acc, 1e-9):
+        if launched[t]:
+            cands.setdefault(int(t), "track")
+    found = []
+    for t in sorted(cands):
+        u = passing(t)
+        if u is not None:
+            found.append((u, cands[t], t))
+    if not found:  # nothing passes: the candidate the ball leaves most decidedly (far, slow serves)
+        still = held_still(p, fps, params)
+        best = [(ratio[t] ** params.fallback_speed * away[t] / max(back[t], 1e-6), t) for t in sorted(cands) if not still[t] and np.isfinite(away[t])
+                and away[t] > params.hit_travel]
+        if not best:
+            return None, "none"
+        t = max(best)[1]
+        return int(t), cands[t]
+    first = found[0][0]
+    window = [f for f in found if f[0] - first <= params.serve_window_s * fps]
+    u, source, t = max(window, key=lambda f: (after[f[0]], f[1] == "hit"))
+    snap = hit_frames[np.abs(hit_frames - u) <= max(1, int(round(params.snap_s * fps)))] if len(hit_frames) else []
+    if len(snap):
+        return int(snap[np.argmin(np.abs(snap - u))]), "hit"
+    return int(u), source
+
+
 def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=("player_near", "player_far"),
-                  aspect: float = 16 / 9, params: RallyParams | None = None) -> RallySegment:
+                  aspect: float = 16 / 9, params: RallyParams | None = None,
+                  hit_prob: np.ndarray | None = None) -> RallySegment:
     """Segment one clip.
 
     Args:
@@ -191,6 +323,8 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
         fps: the clip's frame rate; frames: ``(N,)`` event frames (sorted); labels: their N labels
             (events.csv's; ``ground`` counts bounces).
         hits: the racket-hit labels; aspect: image width / height.
+        hit_prob: ``(T,)`` the model's probability of a racket hit per frame (optional: finds a serve the
+            decoder dropped).
     Returns:
         the :class:`RallySegment`.
     """
@@ -199,35 +333,7 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     labels = [str(c) for c in labels]
     T = len(xy)
     hit_frames = np.array([f for f, c in zip(frames, labels) if c in hits], np.int64)
-    snap = int(round(params.snap_s * fps))
-    reach = int(round(params.away_s[0] * fps))
-    start, source = None, "none"
-    away, back = away_and_back(xy, fps, aspect, params)
-    p = _scaled(xy, aspect)
-    v = np.full(T, np.nan)
-    v[1:] = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    k = max(2, int(round(params.speed_s * fps)))
-    passing, speed = [], []
-    for h in hit_frames:  # decoded hits after which the ball is fast and stays away
-        w = slice(max(h - 1, 0), min(h + 2, T))
-        before, after = v[max(h - k + 1, 0):h + 1], v[h + 2:h + 2 + k]
-        if np.isfinite(after).sum() < 2:
-            continue
-        fast = not np.isfinite(before).any() or np.nanmedian(after) > params.speed_ratio * np.nanmedian(before)
-        if fast and len(away[w]) and (away[w] > np.maximum(params.hit_travel, params.leave_ratio * back[w])).any():
-            passing.append(int(h))
-            speed.append(float(np.nanmedian(after)))
-    if passing:  # the toss or the drop before a serve can pass too: the fastest within serve_window_s
-        sel = [i for i, h in enumerate(passing) if h - passing[0] <= params.serve_window_s * fps]
-        start, source = passing[max(sel, key=lambda i: speed[i])], "hit"
-    cand = serve_candidate(xy, fps, aspect, params) if start is None else None
-    if cand is not None:
-        near = hit_frames[(hit_frames >= cand - snap) & (hit_frames <= cand + reach + snap)]
-        if len(near):
-            start, source = int(near[0]), "hit"
-        else:
-            start = sharpest_turn(xy, cand - reach, cand + reach, aspect)
-            source = "track" if start is not None else "none"
+    start, source = find_serve(xy, fps, hit_frames, aspect, params, hit_prob)
     if start is None:
         start = int(hit_frames[0]) if len(hit_frames) else (int(frames[0]) if len(frames) else 0)
         source = "hit" if len(hit_frames) else "none"
