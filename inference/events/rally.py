@@ -54,6 +54,12 @@ class RallyParams:
     far_leave: float = 3.0
     far_ratio: float = 1.0
     fallback_speed: float = 1.0
+    zone_s: float = 3.0
+    toss_s: float = 1.2
+    toss_dx: float = 0.3
+    toss_fall_s: float = 0.5
+    toss_speedup: float = 1.5
+    exit_ratio: float = 1e9
     hold_s: float = 0.2
     hold_travel: float = 0.004
     peak_prob: float = 0.3
@@ -74,7 +80,7 @@ class RallyParams:
         reports on others): padel's serve bounces; its far serves and near bounces need a stricter test."""
         if sport == "padel":
             return cls(serve_bounce=True, leave_ratio=2.0, away_s=(0.4, 1.0), far_leave=2.0, far_ratio=0.5,
-                       fallback_speed=0.0)
+                       fallback_speed=0.0, exit_ratio=0.5)
         if sport == "tennis":
             return cls(hit_travel=0.05)
         return cls()
@@ -245,6 +251,60 @@ def held_still(p: np.ndarray, fps: float, params: RallyParams) -> np.ndarray:
     return (known >= n // 2) & (moved < params.hold_travel)
 
 
+def box_exit(p: np.ndarray, fps: float, params: RallyParams) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame ``t``: ``exit`` = the smallest distance of the positions within ``away_s`` after ``t`` from
+    the bounding box of the positions in the ``zone_s`` up to ``t`` (the server's bounces and toss), and
+    ``size`` = that box's larger side (image heights; exit -1 where too little is known)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    T = len(p)
+    z = max(2, int(round(params.zone_s * fps)))
+    ok = np.isfinite(p).all(axis=1)
+    pad = np.full((z - 1, 2), np.nan)
+    win_lo = sliding_window_view(np.concatenate([pad, np.where(ok[:, None], p, np.inf)]).T, z, axis=1)
+    win_hi = sliding_window_view(np.concatenate([pad, np.where(ok[:, None], p, -np.inf)]).T, z, axis=1)
+    box_lo = np.nanmin(win_lo, axis=2).T  # (T, 2): the box of the positions in [t - z + 1, t]
+    box_hi = np.nanmax(win_hi, axis=2).T
+    size = np.where(np.isfinite(box_hi - box_lo).all(axis=1), (box_hi - box_lo).max(axis=1), np.nan)
+    a, b = (max(1, int(round(x * fps))) for x in params.away_s)
+    exit_ = np.full(T, np.inf)
+    known = np.zeros(T, int)
+    for s in range(a, min(b, T - 1) + 1):
+        q = p[s:]
+        d = np.linalg.norm(np.maximum(np.maximum(box_lo[:-s] - q, q - box_hi[:-s]), 0.0), axis=1)
+        good = np.isfinite(d)
+        exit_[:-s] = np.where(good, np.minimum(exit_[:-s], d), exit_[:-s])
+        known[:-s] += good
+    exit_[(known < max(2, (b - a + 1) // 3)) | ~ok | ~np.isfinite(size)] = -1.0
+    return exit_, np.nan_to_num(size, nan=0.0)
+
+
+def after_toss(p: np.ndarray, fps: float, t: int, after: np.ndarray, params: RallyParams) -> int | None:
+    """When the ball rises from frame ``t`` and falls back at one image x (a toss, a bounce's rebound), the
+    frame after the top where it is launched at least ``toss_speedup`` × faster than it rose (the serve's
+    contact); None when ``t`` starts no such rise."""
+    T = len(p)
+    end = min(T, t + max(3, int(round(params.toss_s * fps))))
+    seg = p[t:end]
+    if len(seg) < 4 or not np.isfinite(seg[0]).all():
+        return None
+    dy = np.diff(seg[:, 1])
+    falls = np.flatnonzero(~(dy < 0))  # the first frame the ball stops rising (a missing one too): the top
+    top = int(falls[0]) if len(falls) else len(seg) - 1
+    rise = seg[0, 1] - seg[top, 1]
+    if top < 2 or top >= len(seg) - 2 or not np.isfinite(rise) or rise < params.hit_travel or \
+            abs(seg[top, 0] - seg[0, 0]) > params.toss_dx * rise:
+        return None
+    a, b = t + top + 1, min(T - 1, t + top + max(2, int(round(params.toss_fall_s * fps))))
+    v = forward_speed(p, fps)[t:t + top]
+    rose = np.nanmax(v) if np.isfinite(v).any() else np.inf
+    ok = [u for u in range(a, b + 1) if after[u] >= params.toss_speedup * rose]
+    if not ok:
+        return None
+    turn = sharpest_turn(p, ok[0] - 1, min(ok[0] + 2, T - 1), 1.0)
+    return turn if turn is not None else ok[0]
+
+
 def _peaks(x: np.ndarray, lo: float, half: int = 2) -> np.ndarray:
     """Frames where ``x`` is at least ``lo`` and the largest within ``half`` frames."""
     from scipy.ndimage import maximum_filter1d
@@ -268,7 +328,9 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
     ratio, after = launch_scores(p, fps, params)
     away, back = away_and_back(xy, fps, aspect, params)
     leaves = away > np.maximum(params.hit_travel, params.leave_ratio * back)
-    launched = ~held_still(p, fps, params) & ((ratio >= params.launch_ratio) | ((ratio >= params.far_ratio) & (away > params.far_leave * np.maximum(back, 1e-6))))
+    ex, size = box_exit(p, fps, params)
+    launched = ~held_still(p, fps, params) & ((ratio >= params.launch_ratio) | ((ratio >= params.far_ratio) & (
+        away > params.far_leave * np.maximum(back, 1e-6))) | ((ex > params.hit_travel) & (ex > params.exit_ratio * size)))
     near = max(1, int(round(params.refine_s * fps)))
 
     def passing(t: int) -> int | None:  # the frame near t the ball is launched from, if it passes
@@ -302,11 +364,15 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
                 and away[t] > params.hit_travel]
         if not best:
             return None, "none"
-        t = max(best)[1]
-        return int(t), cands[t]
-    first = found[0][0]
-    window = [f for f in found if f[0] - first <= params.serve_window_s * fps]
-    u, source, t = max(window, key=lambda f: (after[f[0]], f[1] == "hit"))
+        u = max(best)[1]
+        source = cands[u]
+    else:
+        first = found[0][0]
+        window = [f for f in found if f[0] - first <= params.serve_window_s * fps]
+        u, source, _ = max(window, key=lambda f: (after[f[0]], f[1] == "hit"))
+    tossed = after_toss(p, fps, u, after, params)  # a toss (or a rebound) was picked: its end is the serve
+    if tossed is not None:
+        u, source = tossed, "track"
     snap = hit_frames[np.abs(hit_frames - u) <= max(1, int(round(params.snap_s * fps)))] if len(hit_frames) else []
     if len(snap):
         return int(snap[np.argmin(np.abs(snap - u))]), "hit"
