@@ -151,7 +151,7 @@ def sharpest_turn(xy: np.ndarray, lo: int, hi: int, aspect: float) -> int | None
 
 
 def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels: list[str], hits, aspect: float,
-              params: RallyParams) -> tuple[int, int]:
+              params: RallyParams, land: np.ndarray | None = None, sides: CourtSides | None = None) -> tuple[int, int]:
     """``(end frame, index of the last rally event + 1)`` given the serve frame and the sorted events:
     the point is over at the second floor bounce after a hit, or, when the events stop (a gap of
     ``gap_s``, no event for ``max_flight_s``), where the ball is lost, stands still or ``dead_s`` later."""
@@ -160,6 +160,12 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
     gap = max(1, int(round(params.gap_s * fps)))
     max_flight = int(round(params.max_flight_s * fps))
     k = int(np.searchsorted(frames, start, side="left"))
+    if land is not None and sides is not None:
+        i = rule_end(frames, labels, land, k, hits, sides)
+        if i is not None and not any(_gap_between(seen, int(frames[j - 1]) if j > k else start, int(frames[j]), gap)
+                                     or frames[j] - (frames[j - 1] if j > k else start) > max_flight
+                                     for j in range(k, i + 1)):
+            return int(frames[i]), i + 1
     last, bounces = k, 0  # events [.., last) are in the rally
     while last < len(frames):
         f = int(frames[last])
@@ -196,6 +202,94 @@ def _gap_between(seen: np.ndarray, a: int, b: int, gap: int) -> bool:
         return False
     run = np.convolve(miss.astype(int), np.ones(gap, int), "valid")
     return bool((run >= gap).any())
+
+
+@dataclass(frozen=True)
+class CourtSides:
+    """What the end-of-point rules need of a court (metres, the court frame of docs/formats.md).
+
+    Attributes:
+        net_y: the net line; x_lo, x_hi: the playing lines across (tennis: singles); length: baseline to
+        baseline; walls: the court has walls (padel: a wall before the floor ends the point, a bounce
+        cannot land beyond the lines); margin: a landing this far outside the lines still counts in.
+    """
+
+    net_y: float
+    x_lo: float
+    x_hi: float
+    length: float
+    walls: bool = False
+    margin: float = 0.15
+
+    @classmethod
+    def from_court(cls, court) -> CourtSides:
+        """From an :class:`inference.court.Court` (singles lines when the court names them)."""
+        pts = court.points
+        x_lo = float(pts["near_singles_left"][0]) if "near_singles_left" in pts else 0.0
+        x_hi = float(pts["near_singles_right"][0]) if "near_singles_right" in pts else float(court.size[0])
+        walls = any(pl.event.startswith("wall") for pl in court.planes)
+        return cls(float(court.net_y), x_lo, x_hi, float(court.size[1]), walls)
+
+    def side(self, y: float) -> str:
+        return "near" if y < self.net_y else "far"
+
+    def inside(self, x: float, y: float) -> bool:
+        m = self.margin
+        return self.x_lo - m <= x <= self.x_hi + m and -m <= y <= self.length + m
+
+
+def floor_positions(xy: np.ndarray, frames: np.ndarray, camera, height: float = 0.0) -> np.ndarray:
+    """``(N, 2)`` court positions (m) where the line of sight through the ball at each event frame meets the
+    plane ``z = height`` (the floor under a bouncing ball); NaN where the ball is missing near the frame or
+    the ray does not reach the floor in front of the camera."""
+    out = np.full((len(frames), 2), np.nan)
+    T = len(xy)
+    for k, f in enumerate(np.asarray(frames, np.int64)):
+        for d in (0, -1, 1, -2, 2):
+            g = int(f) + d
+            if 0 <= g < T and np.isfinite(xy[g]).all():
+                o, v = camera.rays_normalized(xy[g][None])
+                o, v = np.asarray(o, float).reshape(-1, 3)[0], np.asarray(v, float).reshape(-1, 3)[0]
+                if abs(v[2]) > 1e-9:
+                    t = (height - o[2]) / v[2]
+                    if t > 0:
+                        out[k] = (o + t * v)[:2]
+                break
+    return out
+
+
+def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int, hits, sides: CourtSides) -> int | None:
+    """Index of the event that ends the point by the rules, from event ``first`` (the serve) on, or None:
+    after a racket hit the first contact must be the floor in the other half (a bounce on the hitter's
+    own side: the ball hit the net; outside the lines: out; a wall or the net first: a fault), and a
+    second floor bounce in the same half ends it. Two bounces in opposite halves mean a hit was missed
+    in between (the second then counts as the first of the next shot)."""
+    hitter, bounced = None, None  # the last hitter's side; the half of the bounce since that hit
+    for i in range(first, len(frames)):
+        lab = labels[i]
+        if lab in hits:
+            hitter, bounced = ("near" if lab.endswith("near") else "far"), None
+            continue
+        if hitter is None:
+            continue
+        if lab == "net" or (sides.walls and lab != "ground" and bounced is None):
+            return i  # the net, or a wall before the floor
+        if lab != "ground" or not np.isfinite(land[i]).all():
+            continue
+        x, y = land[i]
+        half = sides.side(y)
+        if bounced is None:
+            if half == hitter or not sides.inside(x, y):
+                return i  # into the net (falls on the hitter's side) or out
+            bounced = half
+        elif half == bounced:
+            return i  # the second bounce
+        else:  # a missed hit: the ball came back over the net
+            hitter, bounced = bounced, None
+            if not sides.inside(x, y):
+                return i
+            bounced = half
+    return None
 
 
 def forward_speed(p: np.ndarray, fps: float) -> np.ndarray:
@@ -381,7 +475,7 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
 
 def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=("player_near", "player_far"),
                   aspect: float = 16 / 9, params: RallyParams | None = None,
-                  hit_prob: np.ndarray | None = None) -> RallySegment:
+                  hit_prob: np.ndarray | None = None, camera=None, sides: CourtSides | None = None) -> RallySegment:
     """Segment one clip.
 
     Args:
@@ -391,6 +485,7 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
         hits: the racket-hit labels; aspect: image width / height.
         hit_prob: ``(T,)`` the model's probability of a racket hit per frame (optional: finds a serve the
             decoder dropped).
+        camera, sides: with both, the end follows the rules from where the bounces land (:func:`rule_end`).
     Returns:
         the :class:`RallySegment`.
     """
@@ -403,7 +498,8 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     if start is None:
         start = int(hit_frames[0]) if len(hit_frames) else (int(frames[0]) if len(frames) else 0)
         source = "hit" if len(hit_frames) else "none"
-    end, last = rally_end(xy, fps, start, frames, labels, hits, aspect, params)
+    land = floor_positions(xy, frames, camera) if camera is not None and sides is not None else None
+    end, last = rally_end(xy, fps, start, frames, labels, hits, aspect, params, land, sides)
     first = int(np.searchsorted(frames, start, side="left"))
     if params.serve_bounce and first > 0 and labels[first - 1] not in hits and \
             start - frames[first - 1] <= params.serve_bounce_s * fps:
