@@ -41,7 +41,7 @@ from .features import (
 from .gaps import bridge_events
 from .network import HitNet
 from .physics import PhysicsParams, physics_probs
-from .rally import RallyParams, RallySegment, segment_rally
+from .rally import CourtSides, RallyParams, RallySegment, segment_rally
 
 log = logging.getLogger(__name__)
 
@@ -243,15 +243,18 @@ class EventDetector:
         frames_out, cls, sigma = frames_out[order], cls[order], sigma[order]
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
         sigma = sigma[:len(events)]
-        seg = segment_rally(xy, fps, events.frame, events.event, hits=self.class_set.rules.hits,
-                            aspect=width / height, params=rally or RallyParams.for_sport(self.class_set.sport))
+        probs = probs_to_clip(p_ref, n_frames, fps, self.ref_fps)
+        hits = self.class_set.rules.hits
+        seg = segment_rally(xy, fps, events.frame, events.event, hits=hits, aspect=width / height,
+                            params=rally or RallyParams.for_sport(self.class_set.sport),
+                            hit_prob=probs[:, [self.class_set.index(h) for h in hits]].sum(axis=1), camera=camera,
+                            sides=CourtSides.from_court(self.court) if self.court is not None else None)
         outside = HitEvents(events.frame[~seg.inside], events.event[~seg.inside])
         if not keep_all:
             events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
             coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
             sigma = sigma[seg.inside]
-        return EventResult(events, probs_to_clip(p_ref, n_frames, fps, self.ref_fps), self.class_set.classes,
-                           coarse, seg, outside, sigma)
+        return EventResult(events, probs, self.class_set.classes, coarse, seg, outside, sigma)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,

@@ -267,8 +267,9 @@ def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int
     hitter, bounced = None, None  # the last hitter's side; the half of the bounce since that hit
     for i in range(first, len(frames)):
         lab = labels[i]
-        if lab in hits:
-            hitter, bounced = ("near" if lab.endswith("near") else "far"), None
+        if lab in hits:  # the hitter stands where the ball last bounced (the label when it did not)
+            hitter = bounced or ("near" if lab.endswith("near") else "far")
+            bounced = None
             continue
         if hitter is None:
             continue
