@@ -200,7 +200,7 @@ class EventDetector:
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
                 players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,
-                keep_all: bool = True, rally: RallyParams | None = None) -> EventResult:
+                keep_all: bool = True, rally: RallyParams | None = None, bridge_gaps: bool = True) -> EventResult:
         """Events of one clip.
 
         Args:
@@ -214,6 +214,7 @@ class EventDetector:
                 ``events`` (the default: on detector tracks the segmentation is not reliable yet); False
                 leaves them out. Either way ``outside`` lists them.
             rally: segmentation constants (default: the sport's).
+            bridge_gaps: time racket hits inside the track's gaps from the flights on both sides (:mod:`.gaps`).
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
             raise ValueError(f"fps must be a positive number, got {fps}")
@@ -236,7 +237,8 @@ class EventDetector:
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
         xy = dense_xy(ball, n_frames)
         hit = np.isin(cls, [self.class_set.index(h) for h in self.class_set.rules.hits])
-        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height)
+        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height) if bridge_gaps else (
+            frames_out, np.full(len(frames_out), np.nan))
         frames_out = np.where(hit, bridged, frames_out)  # racket hits in a gap: timed from both flights
         sigma = np.where(hit, sigma, np.nan)
         order = np.argsort(frames_out, kind="stable")
