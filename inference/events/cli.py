@@ -55,11 +55,12 @@ def run(args: argparse.Namespace) -> int:
 
     rally_path = write_rally_yaml(path.parent / "rally.yaml", result.rally, info.fps,
                                   list(zip(result.outside.frame.tolist(), result.outside.event.tolist())))
+    from .rally import rally_summary
+
     counts = {}
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
-    seg = result.rally
-    print(f"{clip.root.name}: rally frames {seg.start}–{seg.end}, {len(result.events)} events {counts} "
-          f"({len(result.outside)} judged outside the point{'' if args.rally_only else ', kept'}); wrote {path} "
+    print(f"{clip.root.name}: {len(result.events)} events {counts}; "
+          f"{rally_summary(result.rally, info.fps, result.outside.event, not args.rally_only)}; wrote {path} "
           f"and {rally_path}")
     return 0

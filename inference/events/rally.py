@@ -459,7 +459,7 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
                 and away[t] > params.hit_travel]
         if not best:
             return None, "none"
-        u = max(best)[1]
+        u = max(best, key=lambda b: (round(b[0], 6), -b[1]))[1]  # a tie: the earliest
         source = cands[u]
     else:
         first = found[0][0]
@@ -508,6 +508,19 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     inside = np.zeros(len(frames), bool)
     inside[first:last] = True
     return RallySegment(int(min(start, T - 1)) if T else 0, int(min(end, T - 1)) if T else 0, inside, source)
+
+
+def rally_summary(seg: RallySegment, fps: float, outside_labels, kept: bool) -> str:
+    """One line for the terminal: the point's frames and times, where the serve came from, and the events
+    judged outside it by label (``kept``: they stay in events.csv)."""
+    counts: dict[str, int] = {}
+    for e in outside_labels:
+        counts[str(e)] = counts.get(str(e), 0) + 1
+    out = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+    return (f"rally frames {seg.start}–{seg.end} ({seg.start / fps:.2f}–{seg.end / fps:.2f} s, serve from "
+            f"{seg.serve_source}); {sum(counts.values())} events outside the point" + (f" ({out})" if out else "")
+            + (", kept in events.csv (--rally-only leaves them out)" if kept and counts else
+               ", left out of events.csv" if counts else ""))
 
 
 # ------------------------------------------------------------------------------------------- file

@@ -247,8 +247,12 @@ def _events_run(ctx: Context) -> Outcome:
     if not len(result.events):
         raise StageError(f"{clip.ball_path}: no hit events found, so the flights cannot be cut — check ball.csv "
                          "(label or re-detect the ball) or pass another --events model")
+    from inference.events.rally import rally_summary
+
+    rally = f"; {rally_summary(result.rally, clip.info.fps, result.outside.event, not ctx.cfg.rally_only)}" \
+        if result.rally is not None else ""
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
-                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")")
+                   ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + ")" + rally)
 
 
 def _write_rally(clip, result) -> None:
