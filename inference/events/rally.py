@@ -55,6 +55,7 @@ class RallyParams:
     far_ratio: float = 1.0
     fallback_speed: float = 1.0
     zone_s: float = 3.0
+    turn_sharpness: float = 3.0
     toss_s: float = 1.2
     toss_dx: float = 0.3
     toss_fall_s: float = 0.5
@@ -445,8 +446,10 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
     acc = np.zeros(T)
     if T >= 3:
         acc[1:-1] = np.nan_to_num(np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=1), nan=0.0)
-    for t in _peaks(acc, 1e-9):
-        if launched[t]:
+    moving = acc[acc > 0]
+    sharp = params.turn_sharpness * float(np.median(moving)) if len(moving) else np.inf
+    for t in _peaks(acc, sharp):
+        if launched[t] and acc[t] > acc[max(t - 1, 0)]:  # a sharp turn (not a plateau of steady curvature)
             cands.setdefault(int(t), "track")
     found = []
     for t in sorted(cands):
