@@ -84,7 +84,8 @@ def main(argv=None) -> dict:
         "serve_from": sources, "cpu_s": cpu,
     }
     fps = f"{args.fps:g} fps" if args.fps else "25–60 fps"
-    print(f"\n{args.sport}, {len(clips)} simulated rallies " + ("without" if args.plain else "with") + " pre-serve bounces and the ball after the point, "
+    kind = "without" if args.plain else "with"
+    print(f"\n{args.sport}, {len(clips)} simulated rallies {kind} pre-serve bounces and the ball after the point, "
           f"{args.track} track, {fps}")
     print(f"serve frame within ±3 frames: {out['serve_within_3']:.1%} (median |error| "
           f"{out['serve_median_abs_frames']:.1f} frames; serve from {sources})")

@@ -1,25 +1,34 @@
 """Rally segmentation: where the point starts (the serve) and ends (the ball is dead), from the ball
-track and the decoded events, so that the server's bounces before the serve and the ball after the
-point are reported apart from the rally's events.
+track, the decoded events and the model's hit probability, so that the server's bounces before the serve
+and the ball after the point are reported apart from the rally's events.
 
-The serve: among the decoded racket hits after which the ball's image speed rises (``speed_ratio``) and
-the ball stays away from where it was (``away_s``; a bounce in the server's hand or a toss comes back, a
-serve does not), the first, or within ``serve_window_s`` of it the one with the fastest ball after it.
-Without such a hit, the first frame from which the ball stays ``min_travel`` away and the sharpest change
-of its velocity there. Sports whose serve bounces first (padel) keep that bounce in the point.
+The serve (:func:`find_serve`): candidates are the decoded racket hits, the peaks of the model's hit
+probability (a serve the decoder dropped) and the track's sharp turns. A candidate is a serve when the
+ball was not resting in a hand just before (:func:`held_still`: a drop or a toss starts from rest), and
+the ball then leaves: much faster than it moved in the second before (:func:`launch_scores`; a bounce in
+the hand or a toss is slow), or far compared with how far it moved before and for good (``away_s``: a
+bounce in the hand comes back, a serve does not), or out of the box of the server's last ``zone_s`` of
+bounces (:func:`box_exit`: a far padel serve is slow in the image but leaves that box). Of the passing
+candidates within ``serve_window_s`` of the first, the one the ball leaves fastest; when one was picked
+at the start of a toss or a rebound that rises and falls at one image x, the launch after its top is the
+serve (:func:`after_toss`). Sports whose serve bounces first (padel) keep that bounce in the point.
 
-The end: the second floor bounce after a hit; else, when the events stop (a gap of ``gap_s`` in the
-track, no event for ``max_flight_s``), where the ball is lost, stands still, or ``dead_s`` after the last
-event. Times are in seconds and distances in image heights, so the constants hold at 25–60 fps.
+The end: with a camera, by the rules where the bounces land on the court (:func:`rule_end`: after a hit
+the ball must first land in the other half, inside the lines; the net, a wall first, out, or a second
+bounce in one half end the point); else the second floor bounce after a hit; else, when the events stop
+(a gap of ``gap_s`` in the track, no event for ``max_flight_s``), where the ball is lost, stands still,
+or ``dead_s`` after the last event. Times are in seconds and distances in image heights, so the
+constants hold at 25–60 fps.
 
 Example:
-    >>> seg = segment_rally(xy, fps, events.frame, coarse, hits=("player_near", "player_far"))
+    >>> seg = segment_rally(xy, fps, events.frame, events.event, hit_prob=p_hit, camera=cam,
+    ...                     sides=CourtSides.from_court(court))
     >>> seg.start, seg.end, seg.inside
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -27,15 +36,30 @@ import numpy as np
 
 @dataclass(frozen=True)
 class RallyParams:
-    """Segmentation constants (seconds and image heights).
+    """Segmentation constants (seconds and image heights; see the module docstring for their use).
 
     Attributes:
-        away_s, min_travel: the track's serve test (:func:`serve_candidate`); behind_s, leave_ratio,
-            hit_travel: a decoded hit is the serve when the ball then stays ``leave_ratio`` × (how far it
-            moved in the ``behind_s`` before) and ``hit_travel`` away, and its image speed during the
-            ``speed_s`` after is ``speed_ratio`` × that before (a catch is not a serve); of such hits within
-            ``serve_window_s`` of the first, the one with the fastest ball after it (not the toss).
-        snap_s: a decoded racket hit this close to the serve test's frame is the serve.
+        away_s: the window after a frame in which the ball must stay away (:func:`away_and_back`);
+            behind_s: how far back its earlier motion (and the fastest speed before a launch) is read.
+        leave_ratio, hit_travel: a serve leaves more than ``leave_ratio`` × its motion before and
+            ``hit_travel`` image heights.
+        speed_s: the speed after a frame is the median over this long; launch_ratio: a serve leaves this many
+            times faster than the ball moved before (at least ``launch_floor`` × the clip's 75th-percentile
+            speed); far_leave, far_ratio: or it goes ``far_leave`` × farther than it moved before and at least
+            ``far_ratio`` as fast; exit_ratio, zone_s: or it leaves the box of the last ``zone_s`` of track by
+            ``exit_ratio`` × the box's size; fallback_speed: when no candidate passes, the one with the
+            largest speed ratio ** fallback_speed × (away / back).
+        turn_sharpness: a track turn is a candidate when its acceleration is this many times the clip's median.
+        median_s: the tests read a running median over ± this long (0: the raw track).
+        toss_s, toss_dx, toss_fall_s, toss_speedup: a toss rises within ``toss_s`` with its top within
+            ``toss_dx`` × its rise of the start's x; the serve is launched within ``toss_fall_s`` after the
+            top ``toss_speedup`` × faster than the ball rose.
+        hold_s, hold_travel: the ball moving less than ``hold_travel`` in the ``hold_s`` before a frame rests
+            in a hand (not a serve).
+        peak_prob: peaks of the hit probability at least this high are candidates; refine_s: a candidate's
+            launch frame is looked for this close to it.
+        serve_window_s: passing candidates this close to the first compete (the fastest wins).
+        snap_s: a decoded racket hit this close to the serve's frame gives its frame.
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
         gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
         dead_s: the ball is dead this long after the last event when the track goes on.
@@ -44,7 +68,6 @@ class RallyParams:
     """
 
     away_s: tuple[float, float] = (0.3, 0.8)
-    min_travel: float = 0.08
     behind_s: float = 1.0
     leave_ratio: float = 1.0
     hit_travel: float = 0.02
@@ -79,7 +102,8 @@ class RallyParams:
     @classmethod
     def for_sport(cls, sport: str | None) -> RallyParams:
         """The sport's constants (tuned on 100 simulated rallies of seed 7007 per sport, ``bench_rally.py``
-        reports on others): padel's serve bounces; its far serves and near bounces need a stricter test."""
+        reports on others): padel's serve bounces first and is slow in the image when far (the longer
+        ``away_s``, the zone's box, the median against a detector's outliers); tennis serves are fast."""
         if sport == "padel":
             return cls(serve_bounce=True, leave_ratio=2.0, away_s=(0.4, 1.0), far_leave=2.0, far_ratio=0.5,
                        fallback_speed=0.0, exit_ratio=0.5, median_s=0.06)
@@ -95,7 +119,8 @@ class RallySegment:
     Attributes:
         start: the serve's frame; end: the frame where the ball is dead (``start <= end``).
         inside: ``(N,)`` bool per event given, True for the rally's events.
-        serve_source: ``hit`` (a decoded racket hit) or ``track`` (the velocity change) or ``none``.
+        serve_source: ``hit`` (a decoded racket hit), ``model`` (a peak of the hit probability the decoder
+            dropped), ``track`` (the track's turn) or ``none``.
     """
 
     start: int
@@ -129,14 +154,6 @@ def away_and_back(xy: np.ndarray, fps: float, aspect: float, params: RallyParams
         d = np.linalg.norm(p[s:] - p[:-s], axis=1)
         back[s:] = np.fmax(back[s:], np.nan_to_num(d, nan=0.0))
     return away, back
-
-
-def serve_candidate(xy: np.ndarray, fps: float, aspect: float, params: RallyParams) -> int | None:
-    """First frame after which the ball stays at least ``min_travel`` image heights away for ``away_s``
-    (a bounce by the server or a toss comes back to the hand; a serve does not), or None."""
-    away, _ = away_and_back(xy, fps, aspect, params)
-    idx = np.flatnonzero(away > params.min_travel)
-    return int(idx[0]) if len(idx) else None
 
 
 def sharpest_turn(xy: np.ndarray, lo: int, hi: int, aspect: float) -> int | None:
@@ -260,7 +277,8 @@ def floor_positions(xy: np.ndarray, frames: np.ndarray, camera, height: float = 
     return out
 
 
-def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int, hits, sides: CourtSides) -> int | None:
+def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int, hits,
+             sides: CourtSides) -> int | None:
     """Index of the event that ends the point by the rules, from event ``first`` (the serve) on, or None:
     after a racket hit the first contact must be the floor in the other half (a bounce on the hitter's
     own side: the ball hit the net; outside the lines: out; a wall or the net first: a fault), and a
@@ -444,8 +462,10 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
     away, back = away_and_back(xy, fps, aspect, params)
     leaves = away > np.maximum(params.hit_travel, params.leave_ratio * back)
     ex, size = box_exit(p, fps, params)
-    launched = ~held_still(p, fps, params) & ((ratio >= params.launch_ratio) | ((ratio >= params.far_ratio) & (
-        away > params.far_leave * np.maximum(back, 1e-6))) | ((ex > params.hit_travel) & (ex > params.exit_ratio * size)))
+    fast = ratio >= params.launch_ratio
+    far = (ratio >= params.far_ratio) & (away > params.far_leave * np.maximum(back, 1e-6))
+    out_of_zone = (ex > params.hit_travel) & (ex > params.exit_ratio * size)
+    launched = ~held_still(p, fps, params) & (fast | far | out_of_zone)
     near = max(1, int(round(params.refine_s * fps)))
 
     def passing(t: int) -> int | None:  # the frame near t the ball is launched from, if it passes
@@ -477,8 +497,8 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
             found.append((u, cands[t], t))
     if not found:  # nothing passes: the candidate the ball leaves most decidedly (far, slow serves)
         still = held_still(p, fps, params)
-        best = [(ratio[t] ** params.fallback_speed * away[t] / max(back[t], 1e-6), t) for t in sorted(cands) if not still[t] and np.isfinite(away[t])
-                and away[t] > params.hit_travel]
+        best = [(ratio[t] ** params.fallback_speed * away[t] / max(back[t], 1e-6), t) for t in sorted(cands)
+                if not still[t] and np.isfinite(away[t]) and away[t] > params.hit_travel]
         if not best:
             return None, "none"
         u = max(best, key=lambda b: (round(b[0], 6), -b[1]))[1]  # a tie: the earliest

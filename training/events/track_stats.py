@@ -188,7 +188,8 @@ def degrade_settings(stats: dict) -> dict:
 
     return {
         "enabled": True, "p_clean": 0.2,
-        "p_occlude_near": round(p(near["near"]["miss"], 0.8), 3), "p_occlude_far": round(p(near["far"]["miss"], 0.3), 3),
+        "p_occlude_near": round(p(near["near"]["miss"], 0.8), 3),
+        "p_occlude_far": round(p(near["far"]["miss"], 0.3), 3),
         "occlude_s": [round(max(lo, 1 / 30), 3), round(max(hi, lo, 1 / 30), 3)],
         "p_gap_event": round(p(near["other"]["miss"], 0.5), 3),
         "event_gap_s": [round(max(lo, 1 / 30), 3), round(max(hi, lo, 1 / 30), 3)],
