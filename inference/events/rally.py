@@ -63,6 +63,7 @@ class RallyParams:
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
         gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
         dead_s: the ball is dead this long after the last event when the track goes on.
+        resume_s: a rules' end is undone when the ball lands in the other half within this long after it.
         still_s, still_speed: the ball moving less than ``still_speed`` image heights per second for
             ``still_s`` ends the point.
     """
@@ -96,6 +97,7 @@ class RallyParams:
     gap_s: float = 1.0
     max_flight_s: float = 2.6
     dead_s: float = 0.5
+    resume_s: float = 3.0
     still_s: float = 0.5
     still_speed: float = 0.05
 
@@ -180,7 +182,7 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
     max_flight = int(round(params.max_flight_s * fps))
     k = int(np.searchsorted(frames, start, side="left"))
     if land is not None and sides is not None:
-        i = rule_end(frames, labels, land, k, hits, sides)
+        i = rule_end(frames, labels, land, k, hits, sides, int(round(params.resume_s * fps)))
         if i is not None and not any(_gap_between(seen, int(frames[j - 1]) if j > k else start, int(frames[j]), gap)
                                      or frames[j] - (frames[j - 1] if j > k else start) > max_flight
                                      for j in range(k, i + 1)):
@@ -278,12 +280,22 @@ def floor_positions(xy: np.ndarray, frames: np.ndarray, camera, height: float = 
 
 
 def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int, hits,
-             sides: CourtSides) -> int | None:
+             sides: CourtSides, resume: int = 0) -> int | None:
     """Index of the event that ends the point by the rules, from event ``first`` (the serve) on, or None:
     after a racket hit the first contact must be the floor in the other half (a bounce on the hitter's
     own side: the ball hit the net; outside the lines: out; a wall or the net first: a fault), and a
     second floor bounce in the same half ends it. Two bounces in opposite halves mean a hit was missed
-    in between (the second then counts as the first of the next shot)."""
+    in between (the second then counts as the first of the next shot). When within ``resume`` frames
+    after such an end the ball lands in the other half, the play went on (a missed or false event misled
+    the rules): the rules restart there."""
+    def goes_on(i: int) -> bool:
+        if not resume or not np.isfinite(land[i]).all():
+            return False
+        half = sides.side(land[i][1])
+        later = [j for j in range(i + 1, len(frames)) if frames[j] - frames[i] <= resume and labels[j] == "ground"
+                 and np.isfinite(land[j]).all()]
+        return any(sides.side(land[j][1]) != half and sides.inside(*land[j]) for j in later)
+
     hitter, bounced = None, None  # the last hitter's side; the half of the bounce since that hit
     for i in range(first, len(frames)):
         lab = labels[i]
@@ -294,20 +306,28 @@ def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int
         if hitter is None:
             continue
         if lab == "net" or (sides.walls and lab != "ground" and bounced is None):
-            return i  # the net, or a wall before the floor
+            if not goes_on(i):
+                return i  # the net, or a wall before the floor
+            hitter, bounced = None, None
+            continue
         if lab != "ground" or not np.isfinite(land[i]).all():
             continue
         x, y = land[i]
         half = sides.side(y)
         if bounced is None:
             if half == hitter or not sides.inside(x, y):
-                return i  # into the net (falls on the hitter's side) or out
+                if not goes_on(i):
+                    return i  # into the net (falls on the hitter's side) or out
+                hitter, bounced = None, None
+                continue
             bounced = half
         elif half == bounced:
-            return i  # the second bounce
+            if not goes_on(i):
+                return i  # the second bounce
+            hitter, bounced = None, None
         else:  # a missed hit: the ball came back over the net
             hitter, bounced = bounced, None
-            if not sides.inside(x, y):
+            if not sides.inside(x, y) and not goes_on(i):
                 return i
             bounced = half
     return None

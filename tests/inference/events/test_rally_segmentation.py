@@ -266,6 +266,9 @@ def test_point_ends_by_the_rules_where_bounces_land():
     net = land.copy()
     net[5] = (5.0, 9.0)  # falls on the hitter's own side: it hit the net
     assert rule_end(frames, labels, net, 0, hits, sides) == 5
+    # ...unless the ball lands in the other half soon after: the play went on (a false or missed event)
+    assert rule_end(frames, labels, net, 0, hits, sides, resume=30) is None
+    assert rule_end(frames, labels, net, 0, hits, sides, resume=10) == 5  # that landing is too late
     keep = [0, 1, 3, 4, 5, 6, 7]  # the far hit was not detected: two bounces in opposite halves, play goes on
     assert rule_end(frames[keep], [labels[k] for k in keep], land[keep], 0, hits, sides) == 5
     double = list(labels)
