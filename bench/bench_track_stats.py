@@ -18,7 +18,8 @@ HEADER = """# Statistics of the project's own ball detector (shipped WASB + trac
 # clips with ground truth, and the `data.degrade` settings that reproduce them. Written by
 # bench/bench_track_stats.py ({clips}); regenerate with its command line below.
 #   {command}
-# Use as: python train.py +experiment=hitnet_padel data=events_padel_robust data/degrade=detector_measured
+# The clips: rally3d synth --around-point --max-frames 240 (docs/events.md#our-detectors-tracks-measured).
+# Use as: python train.py +experiment=hitnet_padel data=events_padel_robust +data/degrade=detector_measured
 """
 
 

@@ -88,3 +88,17 @@ def test_degradation_misses_small_balls_more_when_told():
             d = degrade(c, np.random.default_rng(k), cfg)
             out.append(float(small[d.missed & vis].mean()))
     assert np.mean(gap_small) > 0.8 and np.mean(gap_small) > np.mean(gap_plain) + 0.2
+
+
+def test_shipped_measured_setting_loads_and_composes():
+    """conf/data/degrade/detector_measured.yaml (bench_track_stats.py's output) is a valid degradation and
+    Hydra puts it at data.degrade."""
+    from pathlib import Path
+
+    import yaml
+
+    path = Path(__file__).resolve().parents[3] / "conf" / "data" / "degrade" / "detector_measured.yaml"
+    d = yaml.safe_load(path.read_text())
+    assert d["measured"]["clips"] >= 2 and d["measured"]["miss_by_diameter_px"]
+    cfg = DegradeConfig.from_dict(d)
+    assert cfg.enabled and cfg.miss_by_diameter and 0 < cfg.miss_frac < 0.95
