@@ -61,14 +61,15 @@ def run(args: argparse.Namespace) -> int:
 
     rally_path = write_rally_yaml(path.parent / "rally.yaml", result.rally, info.fps,
                                   list(zip(result.outside.frame.tolist(), result.outside.event.tolist())))
+    from .rally import rally_summary
+
     counts = {}
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
-    seg = result.rally
     model = f"player-aware model, players of {len(players.ids())} tracks" if det.wants_players and players \
         else "ball-only model" if not det.wants_players else "player-aware model WITHOUT players"
-    print(f"{clip.root.name}: {model}; rally frames {seg.start}–{seg.end}, {len(result.events)} events {counts} "
-          f"({len(result.outside)} judged outside the point{'' if args.rally_only else ', kept'}); wrote {path} "
+    print(f"{clip.root.name}: {model}; {len(result.events)} events {counts}; "
+          f"{rally_summary(result.rally, info.fps, result.outside.event, not args.rally_only)}; wrote {path} "
           f"and {rally_path}")
     return 0
 

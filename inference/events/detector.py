@@ -41,7 +41,7 @@ from .features import (
 from .gaps import bridge_events
 from .network import HitNet
 from .physics import PhysicsParams, physics_probs
-from .rally import RallyParams, RallySegment, segment_rally
+from .rally import CourtSides, RallyParams, RallySegment, segment_rally
 
 log = logging.getLogger(__name__)
 
@@ -231,7 +231,7 @@ class EventDetector:
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
                 players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,
-                keep_all: bool = True, rally: RallyParams | None = None) -> EventResult:
+                keep_all: bool = True, rally: RallyParams | None = None, bridge_gaps: bool = True) -> EventResult:
         """Events of one clip.
 
         Args:
@@ -245,6 +245,7 @@ class EventDetector:
                 ``events`` (the default: on detector tracks the segmentation is not reliable yet); False
                 leaves them out. Either way ``outside`` lists them.
             rally: segmentation constants (default: the sport's).
+            bridge_gaps: time racket hits inside the track's gaps from the flights on both sides (:mod:`.gaps`).
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
             raise ValueError(f"fps must be a positive number, got {fps}")
@@ -271,22 +272,26 @@ class EventDetector:
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
         xy = dense_xy(ball, n_frames)
         hit = np.isin(cls, [self.class_set.index(h) for h in self.class_set.rules.hits])
-        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height)
+        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height) if bridge_gaps else (
+            frames_out, np.full(len(frames_out), np.nan))
         frames_out = np.where(hit, bridged, frames_out)  # racket hits in a gap: timed from both flights
         sigma = np.where(hit, sigma, np.nan)
         order = np.argsort(frames_out, kind="stable")
         frames_out, cls, sigma = frames_out[order], cls[order], sigma[order]
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
         sigma = sigma[:len(events)]
-        seg = segment_rally(xy, fps, events.frame, events.event, hits=self.class_set.rules.hits,
-                            aspect=width / height, params=rally or RallyParams.for_sport(self.class_set.sport))
+        probs = probs_to_clip(p_ref, n_frames, fps, self.ref_fps)
+        hits = self.class_set.rules.hits
+        seg = segment_rally(xy, fps, events.frame, events.event, hits=hits, aspect=width / height,
+                            params=rally or RallyParams.for_sport(self.class_set.sport),
+                            hit_prob=probs[:, [self.class_set.index(h) for h in hits]].sum(axis=1), camera=camera,
+                            sides=CourtSides.from_court(self.court) if self.court is not None else None)
         outside = HitEvents(events.frame[~seg.inside], events.event[~seg.inside])
         if not keep_all:
             events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
             coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
             sigma = sigma[seg.inside]
-        return EventResult(events, probs_to_clip(p_ref, n_frames, fps, self.ref_fps), self.class_set.classes,
-                           coarse, seg, outside, sigma)
+        return EventResult(events, probs, self.class_set.classes, coarse, seg, outside, sigma)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,

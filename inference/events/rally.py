@@ -1,23 +1,33 @@
 """Rally segmentation: where the point starts (the serve) and ends (the ball is dead), from the ball
-track and the decoded events, so that the server's bounces before the serve and the ball after the
-point are reported apart from the rally's events.
+track, the decoded events and the model's hit probability, so that the server's bounces before the serve
+and the ball after the point are reported apart from the rally's events.
 
-The serve: among the decoded racket hits after which the ball's image speed rises (``speed_ratio``) and
-the ball stays away from where it was (``away_s``; a bounce in the server's hand or a toss comes back, a
-serve does not), the first, or within ``serve_window_s`` of it the one with the fastest ball after it.
-Without such a hit, the first frame from which the ball stays ``min_travel`` away and the sharpest change
-of its velocity there. Sports whose serve bounces first (padel) keep that bounce in the point.
+The serve (:func:`find_serve`): candidates are the decoded racket hits, the peaks of the model's hit
+probability (a serve the decoder dropped) and the track's sharp turns. A candidate is a serve when the
+ball was not resting in a hand just before (:func:`held_still`: a drop or a toss starts from rest), and
+the ball then leaves: much faster than it moved in the second before (:func:`launch_scores`; a bounce in
+the hand or a toss is slow), or far compared with how far it moved before and for good (``away_s``: a
+bounce in the hand comes back, a serve does not), or out of the box of the server's last ``zone_s`` of
+bounces (:func:`box_exit`: a far padel serve is slow in the image but leaves that box). Of the passing
+candidates within ``serve_window_s`` of the first, the one the ball leaves fastest; when one was picked
+at the start of a toss or a rebound that rises and falls at one image x, the launch after its top is the
+serve (:func:`after_toss`). Sports whose serve bounces first (padel) keep that bounce in the point.
 
-The end: the second floor bounce after a hit; else, when the events stop (a gap of ``gap_s`` in the
-track, no event for ``max_flight_s``), where the ball is lost, stands still, or ``dead_s`` after the last
-event. Times are in seconds and distances in image heights, so the constants hold at 25–60 fps.
+The end: with a camera, by the rules where the bounces land on the court (:func:`rule_end`: after a hit
+the ball must first land in the other half, inside the lines; the net, a wall first, out, or a second
+bounce in one half end the point); else the second floor bounce after a hit; else, when the events stop
+(a gap of ``gap_s`` in the track, no event for ``max_flight_s``), where the ball is lost, stands still,
+or ``dead_s`` after the last event. Times are in seconds and distances in image heights, so the
+constants hold at 25–60 fps.
 
 Example:
-    >>> seg = segment_rally(xy, fps, events.frame, coarse, hits=("player_near", "player_far"))
+    >>> seg = segment_rally(xy, fps, events.frame, events.event, hit_prob=p_hit, camera=cam,
+    ...                     sides=CourtSides.from_court(court))
     >>> seg.start, seg.end, seg.inside
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,29 +36,60 @@ import numpy as np
 
 @dataclass(frozen=True)
 class RallyParams:
-    """Segmentation constants (seconds and image heights).
+    """Segmentation constants (seconds and image heights; see the module docstring for their use).
 
     Attributes:
-        away_s, min_travel: the track's serve test (:func:`serve_candidate`); behind_s, leave_ratio,
-            hit_travel: a decoded hit is the serve when the ball then stays ``leave_ratio`` × (how far it
-            moved in the ``behind_s`` before) and ``hit_travel`` away, and its image speed during the
-            ``speed_s`` after is ``speed_ratio`` × that before (a catch is not a serve); of such hits within
-            ``serve_window_s`` of the first, the one with the fastest ball after it (not the toss).
-        snap_s: a decoded racket hit this close to the serve test's frame is the serve.
+        away_s: the window after a frame in which the ball must stay away (:func:`away_and_back`);
+            behind_s: how far back its earlier motion (and the fastest speed before a launch) is read.
+        leave_ratio, hit_travel: a serve leaves more than ``leave_ratio`` × its motion before and
+            ``hit_travel`` image heights.
+        speed_s: the speed after a frame is the median over this long; launch_ratio: a serve leaves this many
+            times faster than the ball moved before (at least ``launch_floor`` × the clip's 75th-percentile
+            speed); far_leave, far_ratio: or it goes ``far_leave`` × farther than it moved before and at least
+            ``far_ratio`` as fast; exit_ratio, zone_s: or it leaves the box of the last ``zone_s`` of track by
+            ``exit_ratio`` × the box's size; fallback_speed: when no candidate passes, the one with the
+            largest speed ratio ** fallback_speed × (away / back).
+        turn_sharpness: a track turn is a candidate when its acceleration is this many times the clip's median.
+        median_s: the tests read a running median over ± this long (0: the raw track).
+        toss_s, toss_dx, toss_fall_s, toss_speedup: a toss rises within ``toss_s`` with its top within
+            ``toss_dx`` × its rise of the start's x; the serve is launched within ``toss_fall_s`` after the
+            top ``toss_speedup`` × faster than the ball rose.
+        hold_s, hold_travel: the ball moving less than ``hold_travel`` in the ``hold_s`` before a frame rests
+            in a hand (not a serve).
+        peak_prob: peaks of the hit probability at least this high are candidates; refine_s: a candidate's
+            launch frame is looked for this close to it.
+        serve_window_s: passing candidates this close to the first compete (the fastest wins).
+        snap_s: a decoded racket hit this close to the serve's frame gives its frame.
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
         gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
         dead_s: the ball is dead this long after the last event when the track goes on.
+        resume_s: a rules' end is undone when the ball lands in the other half within this long after it.
         still_s, still_speed: the ball moving less than ``still_speed`` image heights per second for
             ``still_s`` ends the point.
     """
 
     away_s: tuple[float, float] = (0.3, 0.8)
-    min_travel: float = 0.08
     behind_s: float = 1.0
     leave_ratio: float = 1.0
     hit_travel: float = 0.02
     speed_s: float = 0.12
-    speed_ratio: float = 1.5
+    launch_ratio: float = 2.0
+    launch_floor: float = 0.5
+    far_leave: float = 3.0
+    far_ratio: float = 1.0
+    fallback_speed: float = 1.0
+    zone_s: float = 3.0
+    turn_sharpness: float = 3.0
+    median_s: float = 0.0
+    toss_s: float = 1.2
+    toss_dx: float = 0.3
+    toss_fall_s: float = 0.5
+    toss_speedup: float = 1.5
+    exit_ratio: float = 1e9
+    hold_s: float = 0.2
+    hold_travel: float = 0.004
+    peak_prob: float = 0.3
+    refine_s: float = 0.04
     serve_window_s: float = 1.2
     snap_s: float = 0.15
     serve_bounce: bool = False
@@ -56,15 +97,18 @@ class RallyParams:
     gap_s: float = 1.0
     max_flight_s: float = 2.6
     dead_s: float = 0.5
+    resume_s: float = 3.0
     still_s: float = 0.5
     still_speed: float = 0.05
 
     @classmethod
     def for_sport(cls, sport: str | None) -> RallyParams:
         """The sport's constants (tuned on 100 simulated rallies of seed 7007 per sport, ``bench_rally.py``
-        reports on others): padel's serve bounces; its far serves and near bounces need a stricter test."""
+        reports on others): padel's serve bounces first and is slow in the image when far (the longer
+        ``away_s``, the zone's box, the median against a detector's outliers); tennis serves are fast."""
         if sport == "padel":
-            return cls(serve_bounce=True, leave_ratio=2.0, speed_ratio=3.0)
+            return cls(serve_bounce=True, leave_ratio=2.0, away_s=(0.4, 1.0), far_leave=2.0, far_ratio=0.5,
+                       fallback_speed=0.0, exit_ratio=0.5, median_s=0.06)
         if sport == "tennis":
             return cls(hit_travel=0.05)
         return cls()
@@ -77,7 +121,8 @@ class RallySegment:
     Attributes:
         start: the serve's frame; end: the frame where the ball is dead (``start <= end``).
         inside: ``(N,)`` bool per event given, True for the rally's events.
-        serve_source: ``hit`` (a decoded racket hit) or ``track`` (the velocity change) or ``none``.
+        serve_source: ``hit`` (a decoded racket hit), ``model`` (a peak of the hit probability the decoder
+            dropped), ``track`` (the track's turn) or ``none``.
     """
 
     start: int
@@ -113,14 +158,6 @@ def away_and_back(xy: np.ndarray, fps: float, aspect: float, params: RallyParams
     return away, back
 
 
-def serve_candidate(xy: np.ndarray, fps: float, aspect: float, params: RallyParams) -> int | None:
-    """First frame after which the ball stays at least ``min_travel`` image heights away for ``away_s``
-    (a bounce by the server or a toss comes back to the hand; a serve does not), or None."""
-    away, _ = away_and_back(xy, fps, aspect, params)
-    idx = np.flatnonzero(away > params.min_travel)
-    return int(idx[0]) if len(idx) else None
-
-
 def sharpest_turn(xy: np.ndarray, lo: int, hi: int, aspect: float) -> int | None:
     """Frame in ``[lo, hi]`` with the largest change of the ball's velocity (None: not enough track)."""
     p = _scaled(xy, aspect)
@@ -135,7 +172,7 @@ def sharpest_turn(xy: np.ndarray, lo: int, hi: int, aspect: float) -> int | None
 
 
 def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels: list[str], hits, aspect: float,
-              params: RallyParams) -> tuple[int, int]:
+              params: RallyParams, land: np.ndarray | None = None, sides: CourtSides | None = None) -> tuple[int, int]:
     """``(end frame, index of the last rally event + 1)`` given the serve frame and the sorted events:
     the point is over at the second floor bounce after a hit, or, when the events stop (a gap of
     ``gap_s``, no event for ``max_flight_s``), where the ball is lost, stands still or ``dead_s`` later."""
@@ -144,6 +181,12 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
     gap = max(1, int(round(params.gap_s * fps)))
     max_flight = int(round(params.max_flight_s * fps))
     k = int(np.searchsorted(frames, start, side="left"))
+    if land is not None and sides is not None:
+        i = rule_end(frames, labels, land, k, hits, sides, int(round(params.resume_s * fps)))
+        if i is not None and not any(_gap_between(seen, int(frames[j - 1]) if j > k else start, int(frames[j]), gap)
+                                     or frames[j] - (frames[j - 1] if j > k else start) > max_flight
+                                     for j in range(k, i + 1)):
+            return int(frames[i]), i + 1
     last, bounces = k, 0  # events [.., last) are in the rally
     while last < len(frames):
         f = int(frames[last])
@@ -182,8 +225,320 @@ def _gap_between(seen: np.ndarray, a: int, b: int, gap: int) -> bool:
     return bool((run >= gap).any())
 
 
+@dataclass(frozen=True)
+class CourtSides:
+    """What the end-of-point rules need of a court (metres, the court frame of docs/formats.md).
+
+    Attributes:
+        net_y: the net line; x_lo, x_hi: the playing lines across (tennis: singles); length: baseline to
+        baseline; walls: the court has walls (padel: a wall before the floor ends the point, a bounce
+        cannot land beyond the lines); margin: a landing this far outside the lines still counts in.
+    """
+
+    net_y: float
+    x_lo: float
+    x_hi: float
+    length: float
+    walls: bool = False
+    margin: float = 0.15
+
+    @classmethod
+    def from_court(cls, court) -> CourtSides:
+        """From an :class:`inference.court.Court` (singles lines when the court names them)."""
+        pts = court.points
+        x_lo = float(pts["near_singles_left"][0]) if "near_singles_left" in pts else 0.0
+        x_hi = float(pts["near_singles_right"][0]) if "near_singles_right" in pts else float(court.size[0])
+        walls = any(pl.event.startswith("wall") for pl in court.planes)
+        return cls(float(court.net_y), x_lo, x_hi, float(court.size[1]), walls)
+
+    def side(self, y: float) -> str:
+        return "near" if y < self.net_y else "far"
+
+    def inside(self, x: float, y: float) -> bool:
+        m = self.margin
+        return self.x_lo - m <= x <= self.x_hi + m and -m <= y <= self.length + m
+
+
+def floor_positions(xy: np.ndarray, frames: np.ndarray, camera, height: float = 0.0) -> np.ndarray:
+    """``(N, 2)`` court positions (m) where the line of sight through the ball at each event frame meets the
+    plane ``z = height`` (the floor under a bouncing ball); NaN where the ball is missing near the frame or
+    the ray does not reach the floor in front of the camera."""
+    out = np.full((len(frames), 2), np.nan)
+    T = len(xy)
+    for k, f in enumerate(np.asarray(frames, np.int64)):
+        for d in (0, -1, 1, -2, 2):
+            g = int(f) + d
+            if 0 <= g < T and np.isfinite(xy[g]).all():
+                o, v = camera.rays_normalized(xy[g][None])
+                o, v = np.asarray(o, float).reshape(-1, 3)[0], np.asarray(v, float).reshape(-1, 3)[0]
+                if abs(v[2]) > 1e-9:
+                    t = (height - o[2]) / v[2]
+                    if t > 0:
+                        out[k] = (o + t * v)[:2]
+                break
+    return out
+
+
+def rule_end(frames: np.ndarray, labels: list[str], land: np.ndarray, first: int, hits,
+             sides: CourtSides, resume: int = 0) -> int | None:
+    """Index of the event that ends the point by the rules, from event ``first`` (the serve) on, or None:
+    after a racket hit the first contact must be the floor in the other half (a bounce on the hitter's
+    own side: the ball hit the net; outside the lines: out; a wall or the net first: a fault), and a
+    second floor bounce in the same half ends it. Two bounces in opposite halves mean a hit was missed
+    in between (the second then counts as the first of the next shot). When within ``resume`` frames
+    after such an end the ball lands in the other half, the play went on (a missed or false event misled
+    the rules): the rules restart there."""
+    def goes_on(i: int) -> bool:
+        if not resume or not np.isfinite(land[i]).all():
+            return False
+        half = sides.side(land[i][1])
+        later = [j for j in range(i + 1, len(frames)) if frames[j] - frames[i] <= resume and labels[j] == "ground"
+                 and np.isfinite(land[j]).all()]
+        return any(sides.side(land[j][1]) != half and sides.inside(*land[j]) for j in later)
+
+    hitter, bounced = None, None  # the last hitter's side; the half of the bounce since that hit
+    for i in range(first, len(frames)):
+        lab = labels[i]
+        if lab in hits:  # the hitter stands where the ball last bounced (the label when it did not)
+            hitter = bounced or ("near" if lab.endswith("near") else "far")
+            bounced = None
+            continue
+        if hitter is None:
+            continue
+        if lab == "net" or (sides.walls and lab != "ground" and bounced is None):
+            if not goes_on(i):
+                return i  # the net, or a wall before the floor
+            hitter, bounced = None, None
+            continue
+        if lab != "ground" or not np.isfinite(land[i]).all():
+            continue
+        x, y = land[i]
+        half = sides.side(y)
+        if bounced is None:
+            if half == hitter or not sides.inside(x, y):
+                if not goes_on(i):
+                    return i  # into the net (falls on the hitter's side) or out
+                hitter, bounced = None, None
+                continue
+            bounced = half
+        elif half == bounced:
+            if not goes_on(i):
+                return i  # the second bounce
+            hitter, bounced = None, None
+        else:  # a missed hit: the ball came back over the net
+            hitter, bounced = bounced, None
+            if not sides.inside(x, y) and not goes_on(i):
+                return i
+            bounced = half
+    return None
+
+
+def running_median(xy: np.ndarray, half: int) -> np.ndarray:
+    """``(T, 2)`` positions → their median over ``±half`` frames (NaN where fewer than half the window is
+    known): a detector's short runs of wrong positions do not survive it, a flight does."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    w = 2 * half + 1
+    pad = np.concatenate([np.full((half, 2), np.nan), xy, np.full((half, 2), np.nan)])
+    win = sliding_window_view(pad, w, axis=0)  # (T, 2, w)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med = np.nanmedian(win, axis=2)
+    med[np.isfinite(win).sum(axis=2).min(axis=1) < half + 1] = np.nan
+    return med
+
+
+def forward_speed(p: np.ndarray, fps: float) -> np.ndarray:
+    """``(T,)`` image speed leaving each frame, ``|p[t+1] - p[t]| · fps`` (NaN where either is missing)."""
+    v = np.full(len(p), np.nan)
+    if len(p) > 1:
+        v[:-1] = np.linalg.norm(np.diff(p, axis=0), axis=1) * fps
+    return v
+
+
+def launch_scores(p: np.ndarray, fps: float, params: RallyParams) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame ``t``: ``after`` = median image speed over the ``speed_s`` leaving ``t`` and ``ratio`` =
+    ``after`` / the fastest the ball moved in the ``behind_s`` before (at least ``launch_floor`` × the
+    clip's 75th-percentile speed): a serve leaves much faster than any bounce in the hand or toss before
+    it; a return does not leave faster than the serve it answers."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    T = len(p)
+    v = forward_speed(p, fps)
+    k = max(2, int(round(params.speed_s * fps)))
+    b = max(2, int(round(params.behind_s * fps)))
+    after = np.full(T, np.nan)
+    if T >= k:
+        w = sliding_window_view(v, k)
+        n_ok = np.isfinite(w).sum(axis=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            med = np.nanmedian(w, axis=1)
+        after[:T - k + 1] = np.where(n_ok >= 2, med, np.nan)
+    pad = np.concatenate([np.full(b, np.nan), v])  # before[t] = max v[t-b .. t-2]
+    w = sliding_window_view(pad, b - 1)[:T]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        before = np.nanmax(w, axis=1)
+        floor = params.launch_floor * (np.nanpercentile(v, 75) if np.isfinite(v).any() else 0.0)
+    ratio = after / np.maximum(np.nan_to_num(before, nan=0.0), max(floor, 1e-6))
+    return np.nan_to_num(ratio, nan=0.0), np.nan_to_num(after, nan=0.0)
+
+
+def held_still(p: np.ndarray, fps: float, params: RallyParams) -> np.ndarray:
+    """``(T,)`` True where the ball moved less than ``hold_travel`` image heights during the ``hold_s``
+    before the frame: it rests in a hand, so what follows is a drop, a throw or a toss, not a serve (a serve
+    meets a falling or rebounding ball)."""
+    T = len(p)
+    n = max(2, int(round(params.hold_s * fps)))
+    moved = np.zeros(T)
+    known = np.zeros(T, int)
+    for s in range(1, min(n, T - 1) + 1):
+        d = np.linalg.norm(p[s:] - p[:-s], axis=1)
+        ok = np.isfinite(d)
+        moved[s:] = np.fmax(moved[s:], np.where(ok, d, 0.0))
+        known[s:] += ok
+    return (known >= n // 2) & (moved < params.hold_travel)
+
+
+def box_exit(p: np.ndarray, fps: float, params: RallyParams) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame ``t``: ``exit`` = the smallest distance of the positions within ``away_s`` after ``t`` from
+    the bounding box of the positions in the ``zone_s`` up to ``t`` (the server's bounces and toss), and
+    ``size`` = that box's larger side (image heights; exit -1 where too little is known)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    T = len(p)
+    z = max(2, int(round(params.zone_s * fps)))
+    ok = np.isfinite(p).all(axis=1)
+    pad = np.full((z - 1, 2), np.nan)
+    win_lo = sliding_window_view(np.concatenate([pad, np.where(ok[:, None], p, np.inf)]).T, z, axis=1)
+    win_hi = sliding_window_view(np.concatenate([pad, np.where(ok[:, None], p, -np.inf)]).T, z, axis=1)
+    box_lo = np.nanmin(win_lo, axis=2).T  # (T, 2): the box of the positions in [t - z + 1, t]
+    box_hi = np.nanmax(win_hi, axis=2).T
+    size = np.where(np.isfinite(box_hi - box_lo).all(axis=1), (box_hi - box_lo).max(axis=1), np.nan)
+    a, b = (max(1, int(round(x * fps))) for x in params.away_s)
+    exit_ = np.full(T, np.inf)
+    known = np.zeros(T, int)
+    for s in range(a, min(b, T - 1) + 1):
+        q = p[s:]
+        d = np.linalg.norm(np.maximum(np.maximum(box_lo[:-s] - q, q - box_hi[:-s]), 0.0), axis=1)
+        good = np.isfinite(d)
+        exit_[:-s] = np.where(good, np.minimum(exit_[:-s], d), exit_[:-s])
+        known[:-s] += good
+    exit_[(known < max(2, (b - a + 1) // 3)) | ~ok | ~np.isfinite(size)] = -1.0
+    return exit_, np.nan_to_num(size, nan=0.0)
+
+
+def after_toss(p: np.ndarray, fps: float, t: int, after: np.ndarray, params: RallyParams) -> int | None:
+    """When the ball rises from frame ``t`` and falls back at one image x (a toss, a bounce's rebound), the
+    frame after the top where it is launched at least ``toss_speedup`` × faster than it rose (the serve's
+    contact); None when ``t`` starts no such rise."""
+    T = len(p)
+    end = min(T, t + max(3, int(round(params.toss_s * fps))))
+    seg = p[t:end]
+    if len(seg) < 4 or not np.isfinite(seg[0]).all():
+        return None
+    dy = np.diff(seg[:, 1])
+    falls = np.flatnonzero(~(dy < 0))  # the first frame the ball stops rising (a missing one too): the top
+    top = int(falls[0]) if len(falls) else len(seg) - 1
+    rise = seg[0, 1] - seg[top, 1]
+    if top < 2 or top >= len(seg) - 2 or not np.isfinite(rise) or rise < params.hit_travel or \
+            abs(seg[top, 0] - seg[0, 0]) > params.toss_dx * rise:
+        return None
+    a, b = t + top + 1, min(T - 1, t + top + max(2, int(round(params.toss_fall_s * fps))))
+    v = forward_speed(p, fps)[t:t + top]
+    rose = np.nanmax(v) if np.isfinite(v).any() else np.inf
+    ok = [u for u in range(a, b + 1) if after[u] >= params.toss_speedup * rose]
+    if not ok:
+        return None
+    turn = sharpest_turn(p, ok[0] - 1, min(ok[0] + 2, T - 1), 1.0)
+    return turn if turn is not None else ok[0]
+
+
+def _peaks(x: np.ndarray, lo: float, half: int = 2) -> np.ndarray:
+    """Frames where ``x`` is at least ``lo`` and the largest within ``half`` frames."""
+    from scipy.ndimage import maximum_filter1d
+
+    x = np.nan_to_num(np.asarray(x, float), nan=0.0)
+    return np.flatnonzero((x >= lo) & (x >= maximum_filter1d(x, 2 * half + 1, mode="nearest")))
+
+
+def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float, params: RallyParams,
+               hit_prob: np.ndarray | None = None) -> tuple[int | None, str]:
+    """The serve's frame and where it came from (``hit``: a decoded racket hit, ``model``: a peak of the
+    model's hit probability the decoder dropped, ``track``: the track alone), or ``(None, "none")``.
+
+    Candidates are the decoded hits, the peaks of ``hit_prob`` (``(T,)``, optional) and the track's
+    sharpest velocity changes; a candidate passes when the ball leaves it much faster than it moved before
+    (:func:`launch_scores`) and stays away (:func:`away_and_back`). Of the passing candidates within
+    ``serve_window_s`` of the first, the one the ball leaves fastest (a toss passes too, slower).
+    """
+    T = len(xy)
+    raw = xy  # contacts are timed on the track as given; the tests read a median-filtered one
+    if params.median_s > 0:
+        xy = running_median(xy, max(1, int(round(params.median_s * fps))))
+    p = _scaled(xy, aspect)
+    ratio, after = launch_scores(p, fps, params)
+    away, back = away_and_back(xy, fps, aspect, params)
+    leaves = away > np.maximum(params.hit_travel, params.leave_ratio * back)
+    ex, size = box_exit(p, fps, params)
+    fast = ratio >= params.launch_ratio
+    far = (ratio >= params.far_ratio) & (away > params.far_leave * np.maximum(back, 1e-6))
+    out_of_zone = (ex > params.hit_travel) & (ex > params.exit_ratio * size)
+    launched = ~held_still(p, fps, params) & (fast | far | out_of_zone)
+    near = max(1, int(round(params.refine_s * fps)))
+
+    def passing(t: int) -> int | None:  # the frame near t the ball is launched from, if it passes
+        lo, hi = max(t - near, 0), min(t + near, T - 1)
+        ok = [u for u in range(lo, hi + 1) if launched[u] and leaves[max(u - 1, 0):u + 2].any()]
+        if not ok:
+            return None
+        turn = sharpest_turn(raw, lo, hi, aspect)
+        return turn if turn is not None and lo <= turn <= hi and turn in ok else max(ok, key=lambda u: ratio[u])
+
+    cands: dict[int, str] = {}
+    for h in hit_frames:
+        cands.setdefault(int(h), "hit")
+    if hit_prob is not None and len(hit_prob):
+        for t in _peaks(hit_prob[:T], params.peak_prob):
+            cands.setdefault(int(t), "model")
+    acc = np.zeros(T)
+    if T >= 3:
+        acc[1:-1] = np.nan_to_num(np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=1), nan=0.0)
+    moving = acc[acc > 0]
+    sharp = params.turn_sharpness * float(np.median(moving)) if len(moving) else np.inf
+    for t in _peaks(acc, sharp):
+        if launched[t] and acc[t] > acc[max(t - 1, 0)]:  # a sharp turn (not a plateau of steady curvature)
+            cands.setdefault(int(t), "track")
+    found = []
+    for t in sorted(cands):
+        u = passing(t)
+        if u is not None:
+            found.append((u, cands[t], t))
+    if not found:  # nothing passes: the candidate the ball leaves most decidedly (far, slow serves)
+        still = held_still(p, fps, params)
+        best = [(ratio[t] ** params.fallback_speed * away[t] / max(back[t], 1e-6), t) for t in sorted(cands)
+                if not still[t] and np.isfinite(away[t]) and away[t] > params.hit_travel]
+        if not best:
+            return None, "none"
+        u = max(best, key=lambda b: (round(b[0], 6), -b[1]))[1]  # a tie: the earliest
+        source = cands[u]
+    else:
+        first = found[0][0]
+        window = [f for f in found if f[0] - first <= params.serve_window_s * fps]
+        u, source, _ = max(window, key=lambda f: (after[f[0]], f[1] == "hit"))
+    tossed = after_toss(p, fps, u, after, params)  # a toss (or a rebound) was picked: its end is the serve
+    if tossed is not None:
+        u, source = tossed, "track"
+    snap = hit_frames[np.abs(hit_frames - u) <= max(1, int(round(params.snap_s * fps)))] if len(hit_frames) else []
+    if len(snap):
+        return int(snap[np.argmin(np.abs(snap - u))]), "hit"
+    return int(u), source
+
+
 def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=("player_near", "player_far"),
-                  aspect: float = 16 / 9, params: RallyParams | None = None) -> RallySegment:
+                  aspect: float = 16 / 9, params: RallyParams | None = None,
+                  hit_prob: np.ndarray | None = None, camera=None, sides: CourtSides | None = None) -> RallySegment:
     """Segment one clip.
 
     Args:
@@ -191,6 +546,9 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
         fps: the clip's frame rate; frames: ``(N,)`` event frames (sorted); labels: their N labels
             (events.csv's; ``ground`` counts bounces).
         hits: the racket-hit labels; aspect: image width / height.
+        hit_prob: ``(T,)`` the model's probability of a racket hit per frame (optional: finds a serve the
+            decoder dropped).
+        camera, sides: with both, the end follows the rules from where the bounces land (:func:`rule_end`).
     Returns:
         the :class:`RallySegment`.
     """
@@ -199,39 +557,12 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     labels = [str(c) for c in labels]
     T = len(xy)
     hit_frames = np.array([f for f, c in zip(frames, labels) if c in hits], np.int64)
-    snap = int(round(params.snap_s * fps))
-    reach = int(round(params.away_s[0] * fps))
-    start, source = None, "none"
-    away, back = away_and_back(xy, fps, aspect, params)
-    p = _scaled(xy, aspect)
-    v = np.full(T, np.nan)
-    v[1:] = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    k = max(2, int(round(params.speed_s * fps)))
-    passing, speed = [], []
-    for h in hit_frames:  # decoded hits after which the ball is fast and stays away
-        w = slice(max(h - 1, 0), min(h + 2, T))
-        before, after = v[max(h - k + 1, 0):h + 1], v[h + 2:h + 2 + k]
-        if np.isfinite(after).sum() < 2:
-            continue
-        fast = not np.isfinite(before).any() or np.nanmedian(after) > params.speed_ratio * np.nanmedian(before)
-        if fast and len(away[w]) and (away[w] > np.maximum(params.hit_travel, params.leave_ratio * back[w])).any():
-            passing.append(int(h))
-            speed.append(float(np.nanmedian(after)))
-    if passing:  # the toss or the drop before a serve can pass too: the fastest within serve_window_s
-        sel = [i for i, h in enumerate(passing) if h - passing[0] <= params.serve_window_s * fps]
-        start, source = passing[max(sel, key=lambda i: speed[i])], "hit"
-    cand = serve_candidate(xy, fps, aspect, params) if start is None else None
-    if cand is not None:
-        near = hit_frames[(hit_frames >= cand - snap) & (hit_frames <= cand + reach + snap)]
-        if len(near):
-            start, source = int(near[0]), "hit"
-        else:
-            start = sharpest_turn(xy, cand - reach, cand + reach, aspect)
-            source = "track" if start is not None else "none"
+    start, source = find_serve(xy, fps, hit_frames, aspect, params, hit_prob)
     if start is None:
         start = int(hit_frames[0]) if len(hit_frames) else (int(frames[0]) if len(frames) else 0)
         source = "hit" if len(hit_frames) else "none"
-    end, last = rally_end(xy, fps, start, frames, labels, hits, aspect, params)
+    land = floor_positions(xy, frames, camera) if camera is not None and sides is not None else None
+    end, last = rally_end(xy, fps, start, frames, labels, hits, aspect, params, land, sides)
     first = int(np.searchsorted(frames, start, side="left"))
     if params.serve_bounce and first > 0 and labels[first - 1] not in hits and \
             start - frames[first - 1] <= params.serve_bounce_s * fps:
@@ -239,6 +570,19 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     inside = np.zeros(len(frames), bool)
     inside[first:last] = True
     return RallySegment(int(min(start, T - 1)) if T else 0, int(min(end, T - 1)) if T else 0, inside, source)
+
+
+def rally_summary(seg: RallySegment, fps: float, outside_labels, kept: bool) -> str:
+    """One line for the terminal: the point's frames and times, where the serve came from, and the events
+    judged outside it by label (``kept``: they stay in events.csv)."""
+    counts: dict[str, int] = {}
+    for e in outside_labels:
+        counts[str(e)] = counts.get(str(e), 0) + 1
+    out = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+    return (f"rally frames {seg.start}–{seg.end} ({seg.start / fps:.2f}–{seg.end / fps:.2f} s, serve from "
+            f"{seg.serve_source}); {sum(counts.values())} events outside the point" + (f" ({out})" if out else "")
+            + (", kept in events.csv (--rally-only leaves them out)" if kept and counts else
+               ", left out of events.csv" if counts else ""))
 
 
 # ------------------------------------------------------------------------------------------- file

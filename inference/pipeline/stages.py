@@ -323,11 +323,15 @@ def _events_run(ctx: Context) -> Outcome:
     if not len(result.events):
         raise StageError(f"{clip.ball_path}: no hit events found, so the flights cannot be cut — check ball.csv "
                          "(label or re-detect the ball) or pass another --events model")
+    from inference.events.rally import rally_summary
+
     model = ("player-aware" if players is not None else "player-aware, no players") if det.wants_players \
         else "ball only"
+    rally = f"; {rally_summary(result.rally, clip.info.fps, result.outside.event, not ctx.cfg.rally_only)}" \
+        if result.rally is not None else ""
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
                    ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + f"; {model})" +
-                   (f" in {len(spans)} court-view shots" if spans is not None else ""))
+                   (f" in {len(spans)} court-view shots" if spans is not None else "") + rally)
 
 
 def _write_rally(clip, result) -> None:

@@ -95,6 +95,7 @@ class DegradeConfig:
     far_miss: float = 0.0
     far_y: float = 0.45
     top_crop: float = 0.0
+    miss_by_diameter: tuple = ()
 
     def __post_init__(self) -> None:
         for name in ("p_clean", "p_occlude_near", "p_occlude_far", "p_gap_event", "miss_frac", "outlier_frac", "p_smooth",
@@ -110,11 +111,19 @@ class DegradeConfig:
         object.__setattr__(self, "outlier_run", (int(run[0]), int(run[1])))
         if self.miss_run_s[0] <= 0:
             raise ValueError(f"DegradeConfig.miss_run_s must be positive, got {self.miss_run_s}")
+        pairs = tuple(tuple(float(v) for v in row) for row in (self.miss_by_diameter or ()))
+        if any(len(r) != 2 or r[0] < 0 or not 0 <= r[1] <= 1 for r in pairs):
+            raise ValueError("DegradeConfig.miss_by_diameter must be [[diameter_px >= 0, miss rate in [0, 1]], ...], "
+                             f"got {self.miss_by_diameter!r}")
+        object.__setattr__(self, "miss_by_diameter", tuple(sorted(pairs)))
         if int(self.val_copies) < 0:
             raise ValueError(f"DegradeConfig.val_copies must be >= 0, got {self.val_copies}")
 
     @classmethod
     def from_dict(cls, d) -> DegradeConfig:
+        if d is not None and not isinstance(d, cls):
+            # "measured": the figures a measured setting was derived from (bench_track_stats.py)
+            d = {k: v for k, v in dict(d).items() if k != "measured"}
         return config_from_dict(cls, d, "data.degrade")
 
 
@@ -168,18 +177,43 @@ def occlusion_mask(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig) -
     return mask
 
 
+def ball_diameter_px(sim: SimClip, height_m: float = 1.0, radius_m: float = 0.033) -> np.ndarray:
+    """``(T,)`` the ball's image diameter (pixels) estimated from the camera: the line of sight through the
+    2D ball meets the plane ``z = height_m`` there; NaN where the ball is missing or the ray misses it."""
+    cam = sim.camera
+    xy = every_frame(sim.ball, sim.n_frames).xy
+    out = np.full(len(xy), np.nan)
+    ok = np.flatnonzero(np.isfinite(xy).all(axis=1))
+    if cam is None or not len(ok):
+        return out
+    o, v = cam.rays_normalized(xy[ok])
+    o, v = np.broadcast_to(np.asarray(o, float), v.shape), np.asarray(v, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (height_m - o[:, 2]) / v[:, 2]
+    X = o + t[:, None] * v
+    good = np.isfinite(t) & (t > 0)
+    depth = cam.depth(X[good])
+    out[ok[good]] = 2.0 * radius_m * float(cam.K[0, 0]) / np.maximum(depth, 1e-6)
+    return out
+
+
 def miss_runs(visible: np.ndarray, already: np.ndarray, fps: float, rng: np.random.Generator,
-              cfg: DegradeConfig) -> np.ndarray:
-    """``(T,)`` runs of misses added until ``miss_frac`` of the visible frames are missed by them."""
+              cfg: DegradeConfig, weight: np.ndarray | None = None) -> np.ndarray:
+    """``(T,)`` runs of misses added until ``miss_frac`` of the visible frames are missed by them; a run
+    starts at a visible frame drawn in proportion to ``weight`` (default: uniform)."""
     n = len(visible)
     target = int(round(cfg.miss_frac * visible.sum()))
     mask = np.zeros(n, bool)
     idx = np.flatnonzero(visible)
+    prob = None
+    if weight is not None and len(idx):
+        w = np.nan_to_num(np.asarray(weight, float)[idx], nan=0.0)
+        prob = w / w.sum() if w.sum() > 0 else None
     tries = 0
     while (mask & visible).sum() < target and len(idx) and tries < 10_000:
         tries += 1
         length = _frames(rng.uniform(*cfg.miss_run_s), fps)
-        a = int(idx[rng.integers(0, len(idx))])
+        a = int(idx[rng.integers(0, len(idx))] if prob is None else rng.choice(idx, p=prob))
         run = np.zeros(n, bool)
         run[a:a + length] = True
         need = target - (mask & visible).sum()
@@ -241,7 +275,11 @@ def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = Degrade
     xy = ball.xy * size
     xy[visible] += rng.normal(0.0, rng.uniform(*cfg.jitter_px), (int(visible.sum()), 2))
     occluded = occlusion_mask(sim, rng, cfg) & visible
-    missed = miss_runs(visible, occluded, sim.fps, rng, cfg)
+    weight = None
+    if cfg.miss_by_diameter:  # misses where the ball is small, as the detector's measured rates say
+        d, r = np.array(cfg.miss_by_diameter).T
+        weight = np.interp(ball_diameter_px(sim), d, r) + 1e-3
+    missed = miss_runs(visible, occluded, sim.fps, rng, cfg, weight)
     detected = visible & ~occluded & ~missed
     if cfg.far_miss > 0:  # the far end: a small ball, lost more often
         far = detected & (ball.xy[:, 1] < cfg.far_y)
