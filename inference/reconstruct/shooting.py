@@ -959,13 +959,46 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
 # ---------------------------------------------------------------------------------------------------
 # Covariance
 # ---------------------------------------------------------------------------------------------------
-def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0, floor_m: float = 0.0,
-                      calibration: Uncertainty | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every frame of the chain: frames (M,), positions (M, 3), owning flights (M,) and 3×3 covariances
-    (M, 3, 3) from the Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it
-    exceeds 1, times ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and
-    along-ray model error), plus ``floor_m``² I."""
+@dataclass
+class FrameErrorModel:
+    """The reported per-frame error model of a fitted chain: frame positions' Jacobians (M, 3, 11) on their
+    columns (M, 11) of θ, θ's covariance (n, n), the isotropic variance (m²) and the along-ray model-error
+    vectors (M, 3: σ × unit line of sight). The covariance of frame m is Jp Σ Jpᵀ + iso I + a aᵀ."""
+
+    frames: np.ndarray
+    xyz: np.ndarray
+    own: np.ndarray
+    jac: np.ndarray
+    cols: np.ndarray
+    theta_cov: np.ndarray
+    iso_var: float
+    along: np.ndarray
+
+    def covariances(self) -> np.ndarray:
+        """(M, 3, 3)."""
+        sub = self.theta_cov[self.cols[:, :, None], self.cols[:, None, :]]                # (M, 11, 11)
+        out = np.einsum("mdc,mce,mfe->mdf", self.jac, sub, self.jac) + self.iso_var * np.eye(3)[None]
+        return out + np.einsum("mi,mj->mij", self.along, self.along)
+
+    def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, M, 3) errors drawn from this model jointly, as a perfectly calibrated fit would make them: one
+        draw of θ per sample propagated to every frame (so the frames of one flight share their depth error),
+        one normal draw of the along-ray model error per flight and sample, the isotropic part per frame."""
+        w, V = np.linalg.eigh(self.theta_cov)
+        z = rng.standard_normal((n, len(w))) * np.sqrt(np.maximum(w, 0.0))
+        dtheta = z @ V.T                                                                  # (n, P)
+        out = np.einsum("mdc,smc->smd", self.jac, dtheta[:, self.cols])
+        flights = rng.standard_normal((n, int(self.own.max()) + 1 if len(self.own) else 0))
+        out += flights[:, self.own, None] * self.along[None]
+        return out + np.sqrt(self.iso_var) * rng.standard_normal(out.shape)
+
+
+def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, floor_m: float = 0.0,
+                      calibration: Uncertainty | None = None) -> FrameErrorModel | None:
+    """Every frame of the chain, from the first to the last frame: the :class:`FrameErrorModel` from the
+    Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it exceeds 1, times
+    ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and along-ray model error),
+    plus ``floor_m``² I. None when θ's normal matrix cannot be inverted."""
     cal = calibration or Uncertainty(floor_m=0.0)
     fl, taus = sol.aux["flights"], sol.aux["taus"]
     frames, own, j = problem.frame_positions(fl, taus)
@@ -978,15 +1011,13 @@ def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0, f
     try:
         cov = np.linalg.pinv(A, hermitian=True) * s2
     except np.linalg.LinAlgError:
-        return frames, xyz, own, np.full((len(frames), 3, 3), np.nan)
+        return None
     dP = (fl.P[own, 1:, j] - fl.P[own, :1, j]) / EPS[None, :, None]             # (M, N_IN, 3)
     Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
-    C = problem.cols[own]                                                        # (M, 11)
-    sub = cov[C[:, :, None], C[:, None, :]]                                      # (M, 11, 11)
-    out = np.einsum("mdc,mce,mfe->mdf", Jp, sub, Jp) + (floor_m**2 + cal.floor_m**2) * np.eye(3)[None]
+    along = np.zeros((len(frames), 3))
     if cal.model_m_per_s:
         ray = xyz - problem.obs.camera.centre
         ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
         t = np.min(np.abs(frames[:, None] - taus[None, :]), axis=1) / problem.fps          # (M,) s
-        out += ((cal.model_m_per_s * t) ** 2)[:, None, None] * np.einsum("mi,mj->mij", ray, ray)
-    return frames, xyz, own, out
+        along = (cal.model_m_per_s * t)[:, None] * ray
+    return FrameErrorModel(frames, xyz, own, Jp, problem.cols[own], cov, floor_m**2 + cal.floor_m**2, along)
