@@ -11,7 +11,9 @@ integer in ±k frames), ground-truth camera, players' court positions from gt/pl
 
 Coverage: share of the frames whose 2D ball is in the image (between the first and the last such frame)
 that have a reconstructed 3D position. σ coverage: share of frames whose error lies inside the 1-σ / 2-σ
-ellipsoid of the reported 3×3 covariance; for a 3D Gaussian 19.9 % / 73.9 %.
+ellipsoid of the reported 3×3 covariance; for a 3D Gaussian 19.9 % / 73.9 %. Oracle: the 5–95 % band of a
+clip's σ coverage when its errors are drawn from the fit's own joint error model (frames of one flight
+share their draw), i.e. what a perfectly calibrated covariance would show on that clip.
 
 ``--calibrate`` fits the court YAML's ``uncertainty`` (scale, along-ray model error between contacts and on
 free ends, floor, per-flight residual inflation) per sport on
