@@ -11,9 +11,12 @@ integer in ±k frames), ground-truth camera, players' court positions from gt/pl
 
 Coverage: share of the frames whose 2D ball is in the image (between the first and the last such frame)
 that have a reconstructed 3D position. σ coverage: share of frames whose error lies inside the 1-σ / 2-σ
-ellipsoid of the reported 3×3 covariance; for a 3D Gaussian 19.9 % / 73.9 %.
+ellipsoid of the reported 3×3 covariance; for a 3D Gaussian 19.9 % / 73.9 %. Oracle: the 5–95 % band of a
+clip's σ coverage when its errors are drawn from the fit's own joint error model (frames of one flight
+share their draw), i.e. what a perfectly calibrated covariance would show on that clip.
 
-``--calibrate`` fits the court YAML's ``uncertainty`` (scale, along-ray model error, floor) per sport on
+``--calibrate`` fits the court YAML's ``uncertainty`` (scale, along-ray model error between contacts and on
+free ends, floor, per-flight residual inflation) per sport on
 clips of other seeds (300+ padel, 400+ tennis: never the benchmark's), by the mean per-clip distance of the
 1-σ / 2-σ coverage from the Gaussian figures, and prints the values to put in conf/court/*.yaml.
 """
@@ -29,6 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.bench_reconstruct import dataset  # noqa: E402
+from inference.court import load_court  # noqa: E402
 from inference.reconstruct.evaluate import Setting, prepare  # noqa: E402
 from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
 from inference.reconstruct.plausibility import penetration  # noqa: E402
@@ -40,13 +44,15 @@ GAUSS_3D = (0.1987, 0.7385)
 
 #: calibration clips' seeds (the benchmark's are 100 / 200)
 CALIBRATION_SEEDS = {"padel": 300, "tennis": 400}
+#: error draws per clip of the oracle check (0: none)
+ORACLE_DRAWS = 400
 #: the raw Gauss-Newton covariance (what --calibrate scales)
 RAW = Uncertainty(scale=1.0, model_m_per_s=0.0, floor_m=0.0)
 
 
-def clip_figures(clip, setting: Setting, uncertainty: Uncertainty | None = None) -> dict:
-    """One clip: errors, contact errors, coverage, σ coverage, plausibility, CPU time (and, for calibration,
-    the error vectors, covariances, lines of sight and times from the nearest event)."""
+def clip_figures(clip, setting: Setting, uncertainty: Uncertainty | None = None, oracle: int = ORACLE_DRAWS) -> dict:
+    """One clip: errors, contact errors, coverage, σ coverage and its oracle band, plausibility, CPU time (and,
+    for calibration, the error vectors, covariances, lines of sight and times from the nearest event)."""
     obs, gt_frames, gt_xyz = prepare(clip, setting)
     true_events = clip.read_events()
     c0 = time.process_time()
@@ -73,6 +79,7 @@ def clip_figures(clip, setting: Setting, uncertainty: Uncertainty | None = None)
     for f, lab in zip(true_events.frame.tolist(), true_events.event.tolist()):
         if lab in contact and f in pos and f in gpos:
             contact[lab].append(float(np.linalg.norm(pos[f] - gpos[f])))
+    band = oracle_band(fit.error_model, b.frame[has][good], cov[good], oracle) if oracle else None
     depth, _ = penetration(obs.court, b.xyz) if len(b) else (np.zeros(0), [])
     limit = 4.0 * 2.0
     pl = fit.extra["plausibility"]
@@ -83,15 +90,32 @@ def clip_figures(clip, setting: Setting, uncertainty: Uncertainty | None = None)
         "below": pl["contacts_below_floor"],
         "over_rms": sum(s.ok and s.reproj_rms_px > limit for s in fit.segments),
         "failed": [s.reason for s in fit.segments if not s.ok],
-        "refits": len(fit.extra.get("refits", [])),
-        "d": d[good], "cov": cov[good], "ray": _rays(obs, gt_xyz[i[has]][good]),
-        "dt": np.min(np.abs(b.frame[has][good][:, None] - obs.event_frames[None, :]), axis=1) / obs.fps,
+        "refits": len(fit.extra.get("refits", [])), "band": band,
+        "d": d[good], "cov": cov[good], **_frame_terms(fit.error_model, b.frame[has][good]),
     }
 
 
-def _rays(obs, xyz: np.ndarray) -> np.ndarray:
-    ray = xyz - obs.camera.centre
-    return ray / np.linalg.norm(ray, axis=1)[:, None]
+def oracle_band(em, frames: np.ndarray, cov: np.ndarray, n: int, seed: int = 0) -> np.ndarray | None:
+    """(3, 2): the 5 % and 95 % quantiles (rows 0, 1) of the 1-σ / 2-σ coverage (columns) of ``frames``, and
+    (row 2, both columns) the share of draws within 10 points of the Gaussian figures, when the errors are drawn from the fit's own joint error model (:class:`~inference.reconstruct.shooting.FrameErrorModel`:
+    frames of one flight share their draw of θ and of the model error), i.e. what a perfectly calibrated
+    covariance with this correlation structure gives on this clip. ``cov``: the reported (F, 3, 3)."""
+    if em is None or not len(frames):
+        return None
+    draws = em.draw(n, np.random.default_rng(seed))[:, frames - em.frames[0]]     # (n, F, 3)
+    m2 = np.einsum("sni,nij,snj->sn", draws, np.linalg.inv(cov), draws)
+    c = np.stack([np.mean(m2 <= 1, axis=1), np.mean(m2 <= 4, axis=1)], axis=1)    # (n, 2)
+    within = np.mean(np.abs(c - np.array(GAUSS_3D)).max(axis=1) <= 0.10)
+    return np.vstack([np.quantile(c, [0.05, 0.95], axis=0), [within, within]])
+
+
+def _frame_terms(em, frames: np.ndarray) -> dict:
+    """The calibration's per-frame inputs at ``frames``: line of sight, time from the nearest contact, free end."""
+    if em is None:
+        z = np.zeros(len(frames))
+        return {"ray": np.zeros((len(frames), 3)), "dt": z, "free": z.astype(bool), "own": z.astype(int), "chi2": z + 1}
+    k = frames - em.frames[0]
+    return {"ray": em.ray[k], "dt": em.dt[k], "free": em.free[k], "own": em.own[k], "chi2": em.flight_chi2[em.own[k]]}
 
 
 def coverage_per_clip(rows: list[dict], u: Uncertainty) -> np.ndarray:
@@ -100,34 +124,38 @@ def coverage_per_clip(rows: list[dict], u: Uncertainty) -> np.ndarray:
     out = []
     for r in rows:
         rr = np.einsum("ni,nj->nij", r["ray"], r["ray"])
-        model = ((u.model_m_per_s * r["dt"]) ** 2)[:, None, None] * rr
-        C = u.scale**2 * r["cov"] + model + u.floor_m**2 * np.eye(3)
+        model = ((u.along_ray_rate(r["free"]) * r["dt"]) ** 2)[:, None, None] * rr
+        k = u.flight_factor(r["chi2"])[:, None, None]
+        C = k * (u.scale**2 * r["cov"] + model) + u.floor_m**2 * np.eye(3)
         m2 = np.einsum("ni,nij,nj->n", r["d"], np.linalg.inv(C), r["d"])
         out.append((np.mean(m2 <= 1), np.mean(m2 <= 4)))
     return np.array(out)
 
 
 def calibrate(rows: list[dict]) -> tuple[Uncertainty, float]:
-    """The grid point of (scale, model_m_per_s, floor_m) with the smallest mean per-clip distance from the
-    Gaussian figures (a clip's distance: the larger of its 1-σ and 2-σ ones); and the worst clip's
-    distance."""
+    """The grid point of :class:`Uncertainty` (scale, model_m_per_s, free_end_m_per_s, floor_m,
+    residual_power) with the smallest mean per-clip distance from the Gaussian figures (a clip's distance: the
+    larger of its 1-σ and 2-σ ones); and the worst clip's distance."""
     best = None
-    for scale in np.arange(0.2, 1.21, 0.05):
-        for model in (0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5):
-            for floor in (0.0, 0.003, 0.006, 0.01):
-                u = Uncertainty(round(float(scale), 3), model, floor)
-                c = coverage_per_clip(rows, u)
-                dev = np.abs(c - np.array(GAUSS_3D)).max(axis=1)
-                score = dev.mean()   # the mean clip, not the worst: a few clips' model errors must not set it
-                if best is None or score < best[0]:
-                    best = (score, u, float(dev.max()))
+    rates = (0.0, 0.1, 0.2, 0.3, 0.5, 1.0)
+    for scale in np.arange(0.5, 1.21, 0.05):
+        for model in rates:
+            for free in rates + (2.0, 3.0, 5.0):
+                for floor in (0.0, 0.003):
+                    for power in (0.0, 1.0, 2.0):
+                        u = Uncertainty(round(float(scale), 3), model, floor, free, power)
+                        c = coverage_per_clip(rows, u)
+                        dev = np.abs(c - np.array(GAUSS_3D)).max(axis=1)
+                        score = dev.mean()   # the mean clip, not the worst: a few clips' model errors must not set it
+                        if best is None or score < best[0]:
+                            best = (score, u, float(dev.max()))
     return best[1], best[2]
 
 
 def table(rows: list[dict], title: str) -> str:
     """Per-clip rows and the pooled line, Markdown."""
     out = [title, "", "| clip | frames | MedAE m | MAE m | near hit m | far hit m | coverage | 1σ | 2σ | "
-           "inside | failed | refits | frames/CPU-s |", "|" + "---|" * 13]
+           "1σ oracle 5–95 % | 2σ oracle 5–95 % | P(oracle ≤ 10 pt) | inside | failed | refits | frames/CPU-s |", "|" + "---|" * 16]
 
     def fmt(a, f=np.median):
         return f"{f(a):.3f}" if len(a) else "–"
@@ -136,8 +164,11 @@ def table(rows: list[dict], title: str) -> str:
         c1 = float(np.mean(r["m2"] <= 1)) if len(r["m2"]) else float("nan")
         c2 = float(np.mean(r["m2"] <= 4)) if len(r["m2"]) else float("nan")
         r["c1"], r["c2"] = c1, c2
+        bd = r.get("band")
+        o1, o2 = (f"{bd[0, k]:.2f}–{bd[1, k]:.2f}" if bd is not None else "–" for k in (0, 1))
+        p10 = f"{bd[2, 0]:.2f}" if bd is not None else "–"
         out.append(f"| {r['name']} | {r['frames']} | {fmt(r['err'])} | {fmt(r['err'], np.mean)} | {fmt(r['near'])} | "
-                   f"{fmt(r['far'])} | {r['coverage']:.3f} | {c1:.2f} | {c2:.2f} | {r['inside']:.3f} | "
+                   f"{fmt(r['far'])} | {r['coverage']:.3f} | {c1:.2f} | {c2:.2f} | {o1} | {o2} | {p10} | {r['inside']:.3f} | "
                    f"{len(r['failed'])} | {r['refits']} | {r['frames'] / max(r['cpu'], 1e-9):.0f} |")
     e = np.concatenate([r["err"] for r in rows])
     m2 = np.concatenate([r["m2"] for r in rows])
@@ -147,12 +178,20 @@ def table(rows: list[dict], title: str) -> str:
     cpu = sum(r["cpu"] for r in rows)
     cov = np.array([r["coverage"] for r in rows])
     out.append(f"| **all** | {frames} | **{fmt(e)}** | {fmt(e, np.mean)} | {fmt(near)} | {fmt(far)} | "
-               f"{cov.min():.3f} (min) | {np.mean(m2 <= 1):.2f} | {np.mean(m2 <= 4):.2f} | "
+               f"{cov.min():.3f} (min) | {np.mean(m2 <= 1):.2f} | {np.mean(m2 <= 4):.2f} | | | | "
                f"{min(r['inside'] for r in rows):.3f} (min) | {sum(len(r['failed']) for r in rows)} | "
                f"{sum(r['refits'] for r in rows)} | **{frames / cpu:.0f}** |")
-    worst = max(max(abs(r["c1"] - GAUSS_3D[0]), abs(r["c2"] - GAUSS_3D[1])) for r in rows)
+    dist = [max(abs(r["c1"] - GAUSS_3D[0]), abs(r["c2"] - GAUSS_3D[1])) for r in rows]
+    worst = max(dist)
+    banded = [r for r in rows if r.get("band") is not None]
+    outside = [r["name"] for r in banded
+               if not all(r["band"][0, k] - 0.005 <= r[c] <= r["band"][1, k] + 0.005 for k, c in ((0, "c1"), (1, "c2")))]
+    expected = sum(r["band"][2, 0] for r in banded)
     out += ["", f"σ coverage per clip: worst distance from the Gaussian figures ({GAUSS_3D[0]:.0%} / "
-            f"{GAUSS_3D[1]:.0%}) {worst * 100:.0f} points. Contacts below the floor: "
+            f"{GAUSS_3D[1]:.0%}) {worst * 100:.0f} points; within 10 points: {sum(x <= 0.10 for x in dist)} / "
+            f"{len(rows)} clips (a perfectly calibrated covariance: {expected:.1f} expected); outside their oracle "
+            f"5–95 % band: {len(outside)} / {len(banded)}"
+            f"{' (' + ', '.join(outside) + ')' if outside else ''}. Contacts below the floor: "
             f"{sum(r['below'] for r in rows)}; reconstructed flights with RMS > 4 × σ: "
             f"{sum(r['over_rms'] for r in rows)}."]
     reasons = [f"{r['name']}: {x}" for r in rows for x in r["failed"]]
@@ -191,15 +230,18 @@ def run_calibration(args) -> None:
         rows = []
         for k in (int(x) for x in args.shift.split(",")):
             setting = Setting(noise_px=2.0, players="gt", event_shift=k, seed=1)
-            rows += [clip_figures(c, setting, RAW) for c in clips]
-        u, worst = calibrate(rows)
-        before = np.abs(coverage_per_clip(rows, Uncertainty()) - np.array(GAUSS_3D)).max()
-        print(f"{sport}: {len(rows)} clip runs; worst per-clip distance from the Gaussian figures "
-              f"{before * 100:.0f} points uncalibrated (scale 1, floor 3 mm) → {worst * 100:.0f} calibrated\n"
-              f"  uncertainty: {{scale: {u.scale:g}, model_m_per_s: {u.model_m_per_s:g}, "
-              f"floor_m: {u.floor_m:g}}}",
-              flush=True)
-
+            rows += [clip_figures(c, setting, RAW, oracle=0) for c in clips]
+        u, _ = calibrate(rows)
+        print(f"{sport}: {len(rows)} clip runs; per-clip distance from the Gaussian figures (mean / worst / "
+              f"clips within 10 points):", flush=True)
+        for name, v in (("uncalibrated (scale 1, floor 3 mm)", Uncertainty()),
+                        ("the court YAML's now", Uncertainty.from_court(load_court(sport))), ("calibrated", u)):
+            dev = np.abs(coverage_per_clip(rows, v) - np.array(GAUSS_3D)).max(axis=1)
+            print(f"  {name}: {dev.mean() * 100:.1f} / {dev.max() * 100:.0f} points, {(dev <= 0.10).sum()} / "
+                  f"{len(dev)}")
+        print(f"  uncertainty: {{scale: {u.scale:g}, model_m_per_s: {u.model_m_per_s:g}, "
+              f"free_end_m_per_s: {u.free_end_m_per_s:g}, floor_m: {u.floor_m:g}, "
+              f"residual_power: {u.residual_power:g}}}", flush=True)
 
 if __name__ == "__main__":
     main()

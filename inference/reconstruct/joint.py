@@ -30,7 +30,7 @@ from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, co
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
 from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain,
-                       frame_covariances, net_height, solve)
+                       FrameErrorModel, frame_error_model, net_height, solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
 
@@ -392,6 +392,7 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
     priors = priors if priors is not None else contact_priors(obs)
     segs = output_segments(obs)
     extra: dict = {}
+    error_model = None
     if not len(priors):
         fits = [SegmentFit.failed(s, "no events: nothing anchors the flight") for s in segs]
     elif not _camera_sees_court(obs):
@@ -407,13 +408,13 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
             fits = [SegmentFit.failed(s, fit) for s in segs]
         else:
             with threadpool_limits(1):  # the covariance's eigendecomposition too (threads: 10× the CPU time)
-                fits = _segment_fits(obs, segs, fit, cfg)
+                fits, error_model = _segment_fits(obs, segs, fit, cfg)
             extra["iterations"] = [fit.sol.iterations]
             if fit.plan.notes:
                 extra["refits"] = list(fit.plan.notes)
     fits = [f for f in fits if f.ok or f.segment.index not in (-1, len(obs.event_frames) - 1)]
     out = RallyFit("joint", obs.fps, fits, time.perf_counter() - t0, extra=extra,
-                   cpu_seconds=time.process_time() - c0)
+                   cpu_seconds=time.process_time() - c0, error_model=error_model)
     out.extra["plausibility"] = summary(out, obs, cfg.rms_fail_factor * cfg.pixel_sigma)
     return out
 
@@ -472,12 +473,20 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
     return fit
 
 
-def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: JointConfig) -> list[SegmentFit]:
-    """The reported flights from the fitted chain (frames, positions, covariances, contacts, checks)."""
+def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: JointConfig
+                  ) -> tuple[list[SegmentFit], FrameErrorModel | None]:
+    """The reported flights from the fitted chain (frames, positions, covariances, contacts, checks), and the
+    chain's per-frame error model."""
     pb, sol = fit.problem, fit.sol
     ch = pb.chain
-    frames, xyz, own, cov = frame_covariances(pb, sol, cfg.sigma_inflation, cfg.sigma_floor_m,
-                                              cfg.uncertainty or Uncertainty.from_court(obs.court))
+    em = frame_error_model(pb, sol, cfg.sigma_inflation, cfg.sigma_floor_m,
+                           cfg.uncertainty or Uncertainty.from_court(obs.court))
+    if em is None:
+        fl, taus = sol.aux["flights"], sol.aux["taus"]
+        frames, own, j = pb.frame_positions(fl, taus)
+        xyz, cov = fl.P[own, 0, j], np.full((len(frames), 3, 3), np.nan)
+    else:
+        frames, xyz, own, cov = em.frames, em.xyz, em.own, em.covariances()
     theta = sol.theta
     checks = fit.checks
     by_event = {c.event: k for k, c in enumerate(fit.plan.contacts) if c.event is not None}
@@ -539,7 +548,7 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
         if notes:
             sf.figures["refit"] = notes
         out.append(sf)
-    return out
+    return out, em
 
 
 def is_hit(label: str | None) -> bool:

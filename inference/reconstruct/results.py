@@ -106,6 +106,8 @@ class RallyFit:
     seconds: float = 0.0
     extra: dict = field(default_factory=dict)
     cpu_seconds: float | None = None
+    #: the joint method's per-frame error model (``shooting.FrameErrorModel``; for calibration checks, not saved)
+    error_model: object | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_frames(self) -> int:

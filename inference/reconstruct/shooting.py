@@ -80,7 +80,11 @@ class Uncertainty:
     """How the joint method's per-frame covariance is calibrated (court YAML ``uncertainty``).
 
     covariance = ``scale``² × the Gauss-Newton covariance + (``model_m_per_s`` × t)² along the line of sight
-    + ``floor_m``² I, with t the time (s) from the frame to the nearest contact. The Gauss-Newton part holds
+    + ``floor_m``² I, with t the time (s) from the frame to the nearest contact; on a free end (the lead-in
+    before the first contact, the run-out after the last: one end pinned, not two) the along-ray term grows
+    by ``free_end_m_per_s`` instead (None: ``model_m_per_s``). A flight whose reprojection residuals say the
+    model is off (mean squared normalised residual χ² > 1) has its covariance (both parts) multiplied by
+    χ²^``residual_power``. The Gauss-Newton part holds
     the 2D noise, the contact times and the priors as the fit states them; ``scale`` corrects their stated
     widths, the along-ray term stands for what the flight model leaves out (drag, spin, the bounce), which the
     2D track cannot see across the line of sight. Fitted per sport on synthetic clips of seeds that the
@@ -90,6 +94,17 @@ class Uncertainty:
     scale: float = 1.0
     model_m_per_s: float = 0.0
     floor_m: float = 0.003
+    free_end_m_per_s: float | None = None
+    residual_power: float = 0.0
+
+    def flight_factor(self, chi2: np.ndarray) -> np.ndarray:
+        """Covariance factor per flight from its mean squared normalised residual (NaN: no 2D points → 1)."""
+        return np.maximum(np.nan_to_num(chi2, nan=1.0), 1.0) ** self.residual_power
+
+    def along_ray_rate(self, free: np.ndarray) -> np.ndarray:
+        """(M,) m/s of the along-ray model error of frames on a free end (``free`` True) or between contacts."""
+        f = self.model_m_per_s if self.free_end_m_per_s is None else self.free_end_m_per_s
+        return np.where(free, f, self.model_m_per_s)
 
     @classmethod
     def from_court(cls, court: Court) -> Uncertainty:
@@ -98,7 +113,7 @@ class Uncertainty:
         if unknown:
             raise ValueError(f"{court.source}: unknown uncertainty keys {unknown}")
         out = cls(**{k: float(v) for k, v in extra.items()})
-        if min(out.scale, out.model_m_per_s, out.floor_m) < 0:
+        if min(out.scale, out.model_m_per_s, out.floor_m, out.free_end_m_per_s or 0.0, out.residual_power) < 0:
             raise ValueError(f"{court.source}: uncertainty values must be ≥ 0, got {extra}")
         return out
 
@@ -959,13 +974,53 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
 # ---------------------------------------------------------------------------------------------------
 # Covariance
 # ---------------------------------------------------------------------------------------------------
-def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0, floor_m: float = 0.0,
-                      calibration: Uncertainty | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every frame of the chain: frames (M,), positions (M, 3), owning flights (M,) and 3×3 covariances
-    (M, 3, 3) from the Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it
-    exceeds 1, times ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and
-    along-ray model error), plus ``floor_m``² I."""
+@dataclass
+class FrameErrorModel:
+    """The reported per-frame error model of a fitted chain: frame positions' Jacobians (M, 3, 11) on their
+    columns (M, 11) of θ, θ's covariance (n, n), the isotropic variance (m²), the along-ray model-error
+    vectors (M, 3: σ × unit line of sight) and each frame's flight factor k (M,). The covariance of frame m is
+    k (Jp Σ Jpᵀ + a aᵀ) + iso I."""
+
+    frames: np.ndarray
+    xyz: np.ndarray
+    own: np.ndarray
+    jac: np.ndarray
+    cols: np.ndarray
+    theta_cov: np.ndarray
+    iso_var: float
+    along: np.ndarray
+    free: np.ndarray        # (M,) frame on a free end (lead-in / run-out)
+    dt: np.ndarray          # (M,) s from the nearest contact
+    ray: np.ndarray         # (M, 3) unit line of sight
+    flight_chi2: np.ndarray  # (flights,) mean squared normalised reprojection residual per 2D coordinate
+    factor: np.ndarray       # (M,) covariance factor of the frame's flight (Uncertainty.flight_factor)
+
+    def covariances(self) -> np.ndarray:
+        """(M, 3, 3)."""
+        sub = self.theta_cov[self.cols[:, :, None], self.cols[:, None, :]]                # (M, 11, 11)
+        out = np.einsum("mdc,mce,mfe->mdf", self.jac, sub, self.jac) + np.einsum("mi,mj->mij", self.along, self.along)
+        return self.factor[:, None, None] * out + self.iso_var * np.eye(3)[None]
+
+    def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(n, M, 3) errors drawn from this model jointly, as a perfectly calibrated fit would make them: one
+        draw of θ per sample propagated to every frame (so the frames of one flight share their depth error),
+        one normal draw of the along-ray model error per flight and sample, the isotropic part per frame."""
+        w, V = np.linalg.eigh(self.theta_cov)
+        z = rng.standard_normal((n, len(w))) * np.sqrt(np.maximum(w, 0.0))
+        dtheta = z @ V.T                                                                  # (n, P)
+        out = np.einsum("mdc,smc->smd", self.jac, dtheta[:, self.cols])
+        flights = rng.standard_normal((n, int(self.own.max()) + 1 if len(self.own) else 0))
+        out += flights[:, self.own, None] * self.along[None]
+        out *= np.sqrt(self.factor)[None, :, None]
+        return out + np.sqrt(self.iso_var) * rng.standard_normal(out.shape)
+
+
+def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, floor_m: float = 0.0,
+                      calibration: Uncertainty | None = None) -> FrameErrorModel | None:
+    """Every frame of the chain, from the first to the last frame: the :class:`FrameErrorModel` from the
+    Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it exceeds 1, times
+    ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and along-ray model error),
+    plus ``floor_m``² I. None when θ's normal matrix cannot be inverted."""
     cal = calibration or Uncertainty(floor_m=0.0)
     fl, taus = sol.aux["flights"], sol.aux["taus"]
     frames, own, j = problem.frame_positions(fl, taus)
@@ -978,15 +1033,26 @@ def frame_covariances(problem: Problem, sol: Solution, inflation: float = 1.0, f
     try:
         cov = np.linalg.pinv(A, hermitian=True) * s2
     except np.linalg.LinAlgError:
-        return frames, xyz, own, np.full((len(frames), 3, 3), np.nan)
+        return None
     dP = (fl.P[own, 1:, j] - fl.P[own, :1, j]) / EPS[None, :, None]             # (M, N_IN, 3)
     Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
-    C = problem.cols[own]                                                        # (M, 11)
-    sub = cov[C[:, :, None], C[:, None, :]]                                      # (M, 11, 11)
-    out = np.einsum("mdc,mce,mfe->mdf", Jp, sub, Jp) + (floor_m**2 + cal.floor_m**2) * np.eye(3)[None]
-    if cal.model_m_per_s:
-        ray = xyz - problem.obs.camera.centre
-        ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
-        t = np.min(np.abs(frames[:, None] - taus[None, :]), axis=1) / problem.fps          # (M,) s
-        out += ((cal.model_m_per_s * t) ** 2)[:, None, None] * np.einsum("mi,mj->mij", ray, ray)
-    return frames, xyz, own, out
+    ray = xyz - problem.obs.camera.centre
+    ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
+    t = np.min(np.abs(frames[:, None] - taus[None, :]), axis=1) / problem.fps          # (M,) s
+    free = np.array([f.end is None for f in problem.chain.flights], bool)[own]
+    along = (cal.along_ray_rate(free) * t)[:, None] * ray
+    chi2 = flight_chi2(problem, taus)
+    return FrameErrorModel(frames, xyz, own, Jp, problem.cols[own], cov, floor_m**2 + cal.floor_m**2, along,
+                           free, t, ray, chi2, cal.flight_factor(chi2)[own])
+
+
+def flight_chi2(problem: Problem, taus: np.ndarray) -> np.ndarray:
+    """(flights,) each flight's mean squared normalised reprojection residual per 2D coordinate (≈ 1 when the
+    flight model explains its track to the 2D noise; NaN without 2D points)."""
+    nf = len(problem.chain.flights)
+    own = problem.owners(problem.frames, taus)
+    live = problem.weights > 0
+    r2 = np.bincount(own[live], problem.last_norm[live] ** 2, minlength=nf)
+    n = np.bincount(own[live], minlength=nf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return r2 / (2.0 * n)

@@ -2,6 +2,7 @@
 in depth (a serve's toss seen from behind the other baseline): kept, not slid along the line of sight."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,8 +39,8 @@ def within(c: tuple[float, float]) -> bool:
 
 def test_padel_covariance_is_calibrated_per_clip():
     """Three noise draws (one with ±2-frame event jitter) of the padel sample, which the calibration (seeds
-    300+) never saw: each draw's coverage lies within 10 points of the Gaussian figures (measured 22–26 % /
-    68–70 %); the uncalibrated Gauss-Newton covariance
+    300+) never saw: each draw's coverage lies within 10 points of the Gaussian figures (measured 23–28 % /
+    65–72 %); the uncalibrated Gauss-Newton covariance
     (scale 1, no model term) is too wide on the same draws (2-σ ellipsoid holding 88–95 % of the frames)."""
     clip = Clip(SAMPLE / "padel_sample")
     cal = [sigma_coverage(clip, seed, 2 if seed == 2 else 0, None) for seed in range(3)]
@@ -111,3 +112,43 @@ def test_a_diverging_hypothesis_does_not_sink_the_clip():
     seen = np.flatnonzero(np.isfinite(uv).all(axis=1))
     rally = seen[(seen >= ev.frame[0]) & (seen <= ev.frame[-1])]
     assert inside.sum() >= 0.98 * len(rally)
+
+
+def test_free_end_rate_and_residual_inflation_scale_only_their_frames():
+    """The along-ray model rate of free ends (``free_end_m_per_s``) widens only the lead-in's frames, along the
+    line of sight; ``residual_power`` multiplies a flight's covariance by χ²^power only where χ² > 1."""
+    obs, _ = toss_then_serve()
+    base = Uncertainty(scale=0.8, model_m_per_s=0.5, floor_m=0.001)
+    em = fit_joint(obs, JointConfig(uncertainty=base)).error_model
+    free = fit_joint(obs, JointConfig(uncertainty=replace(base, free_end_m_per_s=3.0))).error_model
+    assert em.free.any() and (~em.free).any()
+    var_along = lambda m: np.einsum("mi,mij,mj->m", m.ray, m.covariances(), m.ray)   # noqa: E731
+    grown = var_along(free) - var_along(em)
+    expect = ((3.0**2 - 0.5**2) * em.dt**2) * em.factor
+    np.testing.assert_allclose(grown[em.free], expect[em.free], rtol=1e-3, atol=1e-9)
+    np.testing.assert_allclose(grown[~em.free], 0.0, atol=1e-9)
+    # residual inflation: a flight's factor is max(χ², 1)^power
+    chi2 = np.array([0.5, 1.0, 4.0, np.nan])
+    np.testing.assert_allclose(replace(base, residual_power=2.0).flight_factor(chi2), [1.0, 1.0, 16.0, 1.0])
+    big = fit_joint(obs, JointConfig(uncertainty=replace(base, residual_power=2.0))).error_model
+    k = np.maximum(np.nan_to_num(em.flight_chi2, nan=1.0), 1.0) ** 2
+    np.testing.assert_allclose(big.factor, k[em.own])
+    iso = base.floor_m**2 * np.eye(3)
+    np.testing.assert_allclose(big.covariances() - iso, big.factor[:, None, None] * (em.covariances() - iso),
+                               rtol=1e-6, atol=1e-12)
+
+
+def test_oracle_draws_follow_the_reported_covariance_and_share_a_flights_error():
+    """The error model's joint draws (the oracle of bench_joint) have the reported per-frame covariance, and
+    the frames of one flight move together (one depth error per flight), unlike independent frames."""
+    obs, _ = toss_then_serve()
+    em = fit_joint(obs).error_model
+    d = em.draw(4000, np.random.default_rng(0))                        # (n, M, 3)
+    cov = em.covariances()
+    emp = np.einsum("smi,smj->mij", d, d) / len(d)
+    m = len(em.frames) // 2
+    np.testing.assert_allclose(emp[m], cov[m], rtol=0.15, atol=0.05 * np.abs(cov[m]).max())
+    same = np.flatnonzero(em.own == em.own[m])
+    a = d[:, m] @ em.ray[m]
+    b = d[:, same[-1] if same[-1] != m else same[0]] @ em.ray[m]
+    assert abs(np.corrcoef(a, b)[0, 1]) > 0.5
