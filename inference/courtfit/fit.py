@@ -9,8 +9,10 @@
    explains the lines clearly better), rescored;
 4. the gate: the fit is *accepted* only when enough of the visible court lines are found on line pixels
    (coverage), the pixels sit close to the lines (line RMS), lines of both directions are supported, the
-   runner-up explains clearly less (margin) and the camera is plausible. A rejected fit says why; nothing
-   downstream uses it silently.
+   runner-up explains clearly less (margin; a rival that lays a painted line on the near wall's top rail is
+   the rail's echo, not a rival), no painted line runs along that rail in the image (a camera right behind
+   the glass: the rail hides or doubles the near service line, and its pixels cannot tell paint from rail)
+   and the camera is plausible. A rejected fit says why; nothing downstream uses it silently.
 
 Example:
     >>> fit = fit_court(Clip("runs/clip"), load_court("padel"))
@@ -43,6 +45,8 @@ MIN_NET_PX = 50.0
 MAX_PIXELS = 4000
 COVERAGE_STEP_M = 0.1
 BANDS = (6.0, 3.0, 2.0)  # working px: pixels this close to a projected line are assigned to it, per round
+CONFUSION_PX = 14.0  # working px: a painted line whose image runs this close to a near rail's is not trusted
+CONFUSION_SHARE = 0.5  # ... along at least this share of its visible length
 
 
 class AutoFitError(RuntimeError):
@@ -288,6 +292,35 @@ def _evaluate(cam: Camera, residuals: np.ndarray, ev: LineEvidence, model: Court
                       (sum(p[1] for p in net), sum(p[2] for p in net)))
 
 
+def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24) -> np.ndarray:
+    """(S,) whether each floor segment's image runs within :data:`CONFUSION_PX` working px of a near wall's
+    top rail (glass or mesh top, :attr:`CourtLines.structure`) along :data:`CONFUSION_SHARE` of its visible
+    length. Seen from a camera right behind the glass, the near wall's top rail hides the near service
+    line or lies next to it as a second bright line: its pixels cannot tell the paint from the rail."""
+    S = len(model.segments_3d)
+    if not len(model.structure):
+        return np.zeros(S, dtype=bool)
+    w, h = cam.image_size
+    s = np.linspace(0.0, 1.0, n)[None, :, None]
+    rails = cam.project((model.structure[:, :1] + s * (model.structure[:, 1:] - model.structure[:, :1])
+                         ).reshape(-1, 3)).reshape(len(model.structure), n, 2)
+    segs = model.segments_3d
+    pts = cam.project((segs[:, :1] + s * (segs[:, 1:] - segs[:, :1])).reshape(-1, 3)).reshape(S, n, 2)
+    out = np.zeros(S, dtype=bool)
+    for i in range(S):
+        q = pts[i]
+        seen = np.isfinite(q).all(1) & (q[:, 0] >= 0) & (q[:, 0] <= w) & (q[:, 1] >= 0) & (q[:, 1] <= h)
+        if seen.sum() < 2:
+            continue
+        d = np.full(seen.sum(), np.inf)
+        for r in rails:
+            r = r[np.isfinite(r).all(1)]
+            if len(r) >= 2:
+                d = np.minimum(d, np.abs(_signed_distance(q[seen], r)))
+        out[i] = np.mean(d * scale <= CONFUSION_PX) >= CONFUSION_SHARE
+    return out
+
+
 def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Camera | None:
     """The coplanar calibration (item 1) from the court-line crossings mapped by the homography."""
     floor = model.crossings()
@@ -304,7 +337,8 @@ def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Ca
 def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence,
                      distortion: str) -> _Candidate:
     """Refit with k1 and keep it when it explains clearly more painted line (2 % of the visible length), or
-    as much with the bands' centres clearly closer to the lines (15 % lower centre-line RMS)."""
+    as much with the bands' centres clearly closer to the lines (15 % lower centre-line RMS), or a little
+    more (0.5 %) with them closer (10 %)."""
     if distortion == "none":
         return best
     cam1, res1, _ = refine_on_lines(best.camera, model.segments_3d, pixels, ev.scale, n_dist=1)
@@ -315,7 +349,8 @@ def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev
         return k1_cand
     rms0 = _centreline_rms(best.camera, model.segments_3d, pixels, ev.scale)
     rms1 = _centreline_rms(k1_cand.camera, model.segments_3d, pixels, ev.scale)
-    better = rms1 < 0.85 * rms0 and k1_cand.score > best.score - 0.01 * best.visible
+    better = (rms1 < 0.85 * rms0 and k1_cand.score > best.score - 0.01 * best.visible) or \
+        (rms1 < 0.9 * rms0 and k1_cand.score > best.score + 0.005 * best.visible)
     return k1_cand if better else best
 
 
@@ -361,6 +396,9 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     cands.sort(key=lambda c: -c.score)
     best = _with_distortion(cands[0], model, pixels, ev, distortion)
     others = [c for c in cands[1:] if not c.same_as(cands[0], model)]
+    if not confused_segments(best.camera, model, scale).any():
+        # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court
+        others = [c for c in others if not confused_segments(c.camera, model, scale).any()]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0
@@ -393,6 +431,10 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, ev: LineEvidence, cour
         problems.append(f"the net is not where the fit puts it ({100 * best.net_coverage:.0f} % found)")
     if margin < MIN_MARGIN:
         problems.append(f"another placement of the court fits almost as well (margin {margin:.2f})")
+    confused = confused_segments(cam, model, ev.scale)
+    if confused.any():
+        problems.append(f"{int(confused.sum())} painted line(s) run along the near wall's top rail in the image, so "
+                        "the fit cannot tell the paint from the rail")
     if not (c[2] > 1.0 and c[1] < court.net_y):
         problems.append(f"implausible camera position {np.round(c, 1).tolist()}")
     out.accepted = not problems

@@ -12,6 +12,8 @@ from inference.cli import main
 from inference.clipio import Clip, write_video
 from inference.court import load_court
 from inference.courtfit import AutoFitError, fit_court, fit_court_frames, sample_frame_indices
+from inference.courtfit.fit import confused_segments
+from inference.courtfit.model import court_lines
 from training.synth.generate import SynthConfig, SynthScene
 
 SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample" / "padel_sample"
@@ -68,6 +70,41 @@ def test_gate_refuses_the_wrong_court_model():
     fit = fit_court_frames(frames, load_court("tennis"))
     assert not fit.accepted, fit.summary()
     assert "REJECTED" in fit.summary()
+
+
+def _goals_met(fit, scene) -> bool:
+    gt = scene.camera
+    return (np.linalg.norm(fit.camera.centre - gt.centre) <= 0.3 and abs(fit.camera.K[0, 0] / gt.K[0, 0] - 1) <= 0.03
+            and _floor_rms(fit.camera, gt, scene.court) <= 2.0)
+
+
+def test_near_rail_marks_the_painted_line_it_runs_along():
+    """Installed camera right behind the glass (bench seed 519): the near glass's top rail lies over the near
+    service line in the image; a broadcast view (far behind the glass) and tennis (no walls) have no such line."""
+    model = court_lines(load_court("padel"))
+    installed = SynthScene.build(519, SynthConfig(sport="padel", camera="padel_installed")).camera
+    flagged = confused_segments(installed, model, 1280 / max(installed.image_size))
+    near_service = [i for i, (a, b) in enumerate(model.segments_3d) if a[1] == b[1] == 3.05]
+    assert flagged.tolist() == [i in near_service for i in range(len(flagged))]
+    broadcast = SynthScene.build(4, SynthConfig(sport="padel", camera="padel_broadcast")).camera
+    assert not confused_segments(broadcast, model, 1280 / max(broadcast.image_size)).any()
+    tennis = court_lines(load_court("tennis"))
+    assert len(tennis.structure) == 0 and not confused_segments(installed, tennis, 1.0).any()
+
+
+@pytest.mark.parametrize("seed, accepted", [(519, False), (511, True), (507, True)])
+def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed, accepted):
+    """The bench's installed padel views (drawn size, half with lens distortion): 519 — the rail doubles the
+    near service line, the gate refuses and says why; 511 — the rail's echo of the right placement is no rival;
+    507 — mild barrel distortion, k1 kept. An accepted fit is always within the goals."""
+    scene = SynthScene.build(seed, SynthConfig(sport="padel", camera="padel_installed"))
+    frames = [scene.frame(i)[0] for i in sample_frame_indices(scene.rally.n_frames, 9)]
+    fit = fit_court_frames(frames, scene.court)
+    assert fit.accepted == accepted, fit.summary()
+    if fit.accepted:
+        assert _goals_met(fit, scene), fit.summary()
+    else:
+        assert "rail" in fit.reason
 
 
 # ------------------------------------------------------------------------------------------ the CLI
