@@ -9,8 +9,11 @@
    explains the lines clearly better), rescored;
 4. the gate: the fit is *accepted* only when enough of the visible court lines are found on line pixels
    (coverage), the pixels sit close to the lines (line RMS), lines of both directions are supported, the
-   runner-up explains clearly less (margin) and the camera is plausible. A rejected fit says why; nothing
-   downstream uses it silently.
+   runner-up explains clearly less (margin; a rival that lays a painted line on the near wall's top rail is
+   the rail's echo, not a rival; a painted line running along that rail in the image — a camera right
+   behind the glass, where the rail hides or doubles the near service line — has the fit refined with the
+   rails as lines of their own and then asks for a larger margin), the line pixels on the fitted court's
+   floor are mostly on its modelled lines (:func:`unexplained_share`) and the camera is plausible. A rejected fit says why; nothing downstream uses it silently.
 
 Example:
     >>> fit = fit_court(Clip("runs/clip"), load_court("padel"))
@@ -21,6 +24,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -37,12 +41,16 @@ N_FRAMES = 9
 MIN_COVERAGE = 0.6
 MAX_LINE_RMS = 1.0  # working px
 MIN_MARGIN = 1.1
+MAX_UNEXPLAINED = 0.45  # of the line pixels inside the fitted court's floor, on none of its modelled lines
+MIN_MARGIN_RAIL = 1.2  # ... when a painted line runs along a near wall's top rail (less independent evidence)
 MIN_LINES_PER_KIND = 2
 MIN_NET_COVERAGE = 0.7  # of the net top's visible image length, when it is at least MIN_NET_PX long
 MIN_NET_PX = 50.0
 MAX_PIXELS = 4000
 COVERAGE_STEP_M = 0.1
 BANDS = (6.0, 3.0, 2.0)  # working px: pixels this close to a projected line are assigned to it, per round
+CONFUSION_PX = 16.0  # working px: a painted line whose image runs this close to a near rail's is not trusted
+CONFUSION_SHARE = 0.5  # ... along at least this share of its visible length
 
 
 class AutoFitError(RuntimeError):
@@ -62,6 +70,8 @@ class AutoFit:
         line_rms_px: RMS distance (full-resolution px) of the assigned line pixels to the fitted lines.
         lines_supported: (transverse, longitudinal) model lines with ≥ 50 % of their visible length found.
         margin: score of the fit over that of the best different candidate (inf when there is none).
+        unexplained: share of the line pixels inside the fitted court's floor on none of its modelled lines
+            (NaN when too few; see :func:`unexplained_share`).
         reason: why the fit was rejected ("" when accepted).
         frames: the frame indices whose median was used.
         cpu_seconds: CPU time of the fit (frame decoding included when :func:`fit_court` read them).
@@ -75,6 +85,7 @@ class AutoFit:
     line_rms_px: float = float("nan")
     lines_supported: tuple[int, int] = (0, 0)
     margin: float = 0.0
+    unexplained: float = float("nan")
     reason: str = ""
     frames: list[int] = field(default_factory=list)
     cpu_seconds: float = 0.0
@@ -87,6 +98,7 @@ class AutoFit:
                 "line_rms_px": round(float(self.line_rms_px), 3),
                 "lines_supported": list(self.lines_supported),
                 "margin": None if not np.isfinite(self.margin) else round(float(self.margin), 3),
+                "unexplained": None if not np.isfinite(self.unexplained) else round(float(self.unexplained), 3),
                 "frames": list(self.frames), "reason": self.reason}
 
     def summary(self) -> str:
@@ -207,6 +219,7 @@ class _Candidate:
     residuals: np.ndarray
     per_line: list[tuple[str, float, float]]  # floor segments: (kind, supported, visible) image length
     net: tuple[float, float]  # the net's top: supported, visible image length
+    confused: np.ndarray | None = None  # (S,) segments left out of the fit as the near rail's (None: none)
 
     @property
     def hits(self) -> float:
@@ -288,6 +301,35 @@ def _evaluate(cam: Camera, residuals: np.ndarray, ev: LineEvidence, model: Court
                       (sum(p[1] for p in net), sum(p[2] for p in net)))
 
 
+def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24) -> np.ndarray:
+    """(S,) whether each floor segment's image runs within :data:`CONFUSION_PX` working px of a near wall's
+    top rail (glass or mesh top, :attr:`CourtLines.structure`) along :data:`CONFUSION_SHARE` of its visible
+    length. Seen from a camera right behind the glass, the near wall's top rail hides the near service
+    line or lies next to it as a second bright line: its pixels cannot tell the paint from the rail."""
+    S = len(model.segments_3d)
+    if not len(model.structure):
+        return np.zeros(S, dtype=bool)
+    w, h = cam.image_size
+    s = np.linspace(0.0, 1.0, n)[None, :, None]
+    rails = cam.project((model.structure[:, :1] + s * (model.structure[:, 1:] - model.structure[:, :1])
+                         ).reshape(-1, 3)).reshape(len(model.structure), n, 2)
+    segs = model.segments_3d
+    pts = cam.project((segs[:, :1] + s * (segs[:, 1:] - segs[:, :1])).reshape(-1, 3)).reshape(S, n, 2)
+    out = np.zeros(S, dtype=bool)
+    for i in range(S):
+        q = pts[i]
+        seen = np.isfinite(q).all(1) & (q[:, 0] >= 0) & (q[:, 0] <= w) & (q[:, 1] >= 0) & (q[:, 1] <= h)
+        if seen.sum() < 2:
+            continue
+        d = np.full(seen.sum(), np.inf)
+        for r in rails:
+            r = r[np.isfinite(r).all(1)]
+            if len(r) >= 2:
+                d = np.minimum(d, np.abs(_signed_distance(q[seen], r)))
+        out[i] = np.mean(d * scale <= CONFUSION_PX) >= CONFUSION_SHARE
+    return out
+
+
 def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Camera | None:
     """The coplanar calibration (item 1) from the court-line crossings mapped by the homography."""
     floor = model.crossings()
@@ -304,7 +346,8 @@ def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Ca
 def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence,
                      distortion: str) -> _Candidate:
     """Refit with k1 and keep it when it explains clearly more painted line (2 % of the visible length), or
-    as much with the bands' centres clearly closer to the lines (15 % lower centre-line RMS)."""
+    as much with the bands' centres clearly closer to the lines (15 % lower centre-line RMS), or a little
+    more (0.5 %) with them closer (10 %)."""
     if distortion == "none":
         return best
     cam1, res1, _ = refine_on_lines(best.camera, model.segments_3d, pixels, ev.scale, n_dist=1)
@@ -315,8 +358,54 @@ def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev
         return k1_cand
     rms0 = _centreline_rms(best.camera, model.segments_3d, pixels, ev.scale)
     rms1 = _centreline_rms(k1_cand.camera, model.segments_3d, pixels, ev.scale)
-    better = rms1 < 0.85 * rms0 and k1_cand.score > best.score - 0.01 * best.visible
+    better = (rms1 < 0.85 * rms0 and k1_cand.score > best.score - 0.01 * best.visible) or \
+        (rms1 < 0.9 * rms0 and k1_cand.score > best.score + 0.005 * best.visible)
     return k1_cand if better else best
+
+
+def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: float = 3.0, n: int = 24) -> float:
+    """Share of the line pixels inside the fitted court's floor (its projected outline) that lie on none of
+    the court's modelled lines (paint, net, glass and mesh edges: ``court.lines``) by more than ``band_px``
+    working px. A right fit explains nearly all of them; a fit that laid the court's near lines on the
+    walls' rails leaves the real painted lines unexplained inside it."""
+    segs = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2, 3) for v in court.lines.values()])
+    s = np.linspace(0.0, 1.0, n)[None, :, None]
+    polys = cam.project((segs[:, :1] + s * (segs[:, 1:] - segs[:, :1])).reshape(-1, 3)).reshape(len(segs), n, 2)
+    x0, y0, (x1, y1) = 0.0, 0.0, court.size[:2]
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
+    edge = np.concatenate([a + s[0] * (b - a) for a, b in zip(corners[:-1], corners[1:])])
+    outline = cam.project(np.concatenate([edge, np.zeros((len(edge), 1))], axis=1))
+    if not np.isfinite(outline).all():
+        return float("nan")
+    h, w = ev.mask.shape
+    floor = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(floor, [np.round((outline + 0.5) * ev.scale - 0.5).astype(np.int32)], 1)
+    ys, xs = np.nonzero(ev.mask & floor.astype(bool))
+    if len(xs) < 20:
+        return float("nan")
+    pix = (np.stack([xs, ys], axis=1) + 0.5) / ev.scale - 0.5
+    d = np.full(len(pix), np.inf)
+    for poly in polys:
+        poly = poly[np.isfinite(poly).all(1)]
+        if len(poly) >= 2:
+            d = np.minimum(d, np.abs(_signed_distance(pix, poly)))
+    return float(np.mean(d * ev.scale > band_px))
+
+
+def _without_rail(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence) -> _Candidate:
+    """Refit with the near walls' top rails as lines of their own when a painted line runs along one in the
+    image: seen from right behind the glass, the rail doubles that line and its pixels pull the fit onto
+    the rail; fitted as a line of its own, the rail keeps its pixels and the paint keeps the paint's. The
+    candidate's evidence stays that of the painted lines (its ``confused`` segments are recorded)."""
+    conf = confused_segments(best.camera, model, ev.scale)
+    if not conf.any():
+        return best
+    n_dist = 0 if best.camera.dist is None else 1
+    segs = np.concatenate([model.segments_3d, model.structure])
+    cam, res, _ = refine_on_lines(best.camera, segs, pixels, ev.scale, n_dist=n_dist)
+    cand = _evaluate(cam, res, ev, model)
+    cand.confused = conf
+    return cand
 
 
 # ---------------------------------------------------------------------------------------- the fit
@@ -360,7 +449,11 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
         return out
     cands.sort(key=lambda c: -c.score)
     best = _with_distortion(cands[0], model, pixels, ev, distortion)
+    best = _without_rail(best, model, pixels, ev)
     others = [c for c in cands[1:] if not c.same_as(cands[0], model)]
+    if not confused_segments(best.camera, model, scale).any():
+        # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court
+        others = [c for c in others if not confused_segments(c.camera, model, scale).any()]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0
@@ -391,8 +484,17 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, ev: LineEvidence, cour
         problems.append(f"too few lines supported ({out.lines_supported[0]} across, {out.lines_supported[1]} along)")
     if best.net[1] >= MIN_NET_PX and best.net_coverage < MIN_NET_COVERAGE:
         problems.append(f"the net is not where the fit puts it ({100 * best.net_coverage:.0f} % found)")
-    if margin < MIN_MARGIN:
+    min_margin = MIN_MARGIN if best.confused is None else MIN_MARGIN_RAIL
+    if margin < min_margin:
         problems.append(f"another placement of the court fits almost as well (margin {margin:.2f})")
+    confused = confused_segments(cam, model, ev.scale)
+    if confused.any() and best.confused is None:
+        problems.append(f"{int(confused.sum())} painted line(s) run along the near wall's top rail in the image, so "
+                        "the fit cannot tell the paint from the rail")
+    out.unexplained = unexplained_share(cam, court, ev)
+    if out.unexplained > MAX_UNEXPLAINED:
+        problems.append(f"{100 * out.unexplained:.0f} % of the line pixels on the fitted court's floor lie on none "
+                        "of its lines (the court may be placed on the walls' rails)")
     if not (c[2] > 1.0 and c[1] < court.net_y):
         problems.append(f"implausible camera position {np.round(c, 1).tolist()}")
     out.accepted = not problems

@@ -41,12 +41,16 @@ class CourtLines:
         transverse: model lines along x, far (largest y) first.
         longitudinal: model lines along y, left (smallest x) first.
         raised: (R, 2, 3) painted or taped lines above the floor (the net's top), used to check a fit in 3D.
+        structure: (T, 2, 3) raised transverse edges of the near walls (glass and mesh tops): rails between
+            the camera and the court that can hide or double a painted line in the image (see
+            :func:`.fit.confused_segments`).
     """
 
     segments: np.ndarray
     transverse: tuple[ModelLine, ...]
     longitudinal: tuple[ModelLine, ...]
     raised: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    structure: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
 
     @property
     def segments_3d(self) -> np.ndarray:
@@ -92,6 +96,9 @@ def court_lines(court: Court) -> CourtLines:
                          "each axis (lines.paint in the court YAML)")
     net = court.lines.get("net", np.zeros((0, 2, 3)))
     raised = np.array([s for s in net if np.all(s[:, 2] > 0.3)], dtype=float).reshape(-1, 2, 3)
+    walls = [s for layer in ("glass", "mesh") for s in court.lines.get(layer, np.zeros((0, 2, 3)))]
+    near = [s for s in walls if np.all(s[:, 2] > 0.3) and abs(s[1, 1] - s[0, 1]) < 1e-9 and s[0, 1] < court.net_y]
+    structure = np.array(near, dtype=float).reshape(-1, 2, 3)
     return CourtLines(np.array(segs, dtype=float).reshape(-1, 2, 2),
                       tuple(ModelLine("transverse", y) for y in sorted(trans, reverse=True)),
-                      tuple(ModelLine("longitudinal", x) for x in sorted(longi)), raised)
+                      tuple(ModelLine("longitudinal", x) for x in sorted(longi)), raised, structure)
