@@ -301,6 +301,23 @@ def _evaluate(cam: Camera, residuals: np.ndarray, ev: LineEvidence, model: Court
                       (sum(p[1] for p in net), sum(p[2] for p in net)))
 
 
+def _projected_polylines(cam: Camera, segments: np.ndarray, n: int = 24) -> np.ndarray:
+    """(S, 2, 3) 3D segments → (S, n, 2) image points along each (NaN where behind the camera)."""
+    s = np.linspace(0.0, 1.0, n)[None, :, None]
+    pts = segments[:, :1] + s * (segments[:, 1:] - segments[:, :1])
+    return cam.project(pts.reshape(-1, 3)).reshape(len(segments), n, 2)
+
+
+def _distance_to_polylines(pix: np.ndarray, polys: np.ndarray) -> np.ndarray:
+    """(N, 2) pixels, (P, K, 2) image polylines → (N,) distance to the nearest one (inf when none is seen)."""
+    d = np.full(len(pix), np.inf)
+    for poly in polys:
+        poly = poly[np.isfinite(poly).all(1)]
+        if len(poly) >= 2:
+            d = np.minimum(d, np.abs(_signed_distance(pix, poly)))
+    return d
+
+
 def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24) -> np.ndarray:
     """(S,) whether each floor segment's image runs within :data:`CONFUSION_PX` working px of a near wall's
     top rail (glass or mesh top, :attr:`CourtLines.structure`) along :data:`CONFUSION_SHARE` of its visible
@@ -310,22 +327,15 @@ def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24)
     if not len(model.structure):
         return np.zeros(S, dtype=bool)
     w, h = cam.image_size
-    s = np.linspace(0.0, 1.0, n)[None, :, None]
-    rails = cam.project((model.structure[:, :1] + s * (model.structure[:, 1:] - model.structure[:, :1])
-                         ).reshape(-1, 3)).reshape(len(model.structure), n, 2)
-    segs = model.segments_3d
-    pts = cam.project((segs[:, :1] + s * (segs[:, 1:] - segs[:, :1])).reshape(-1, 3)).reshape(S, n, 2)
+    rails = _projected_polylines(cam, model.structure, n)
+    pts = _projected_polylines(cam, model.segments_3d, n)
     out = np.zeros(S, dtype=bool)
     for i in range(S):
         q = pts[i]
         seen = np.isfinite(q).all(1) & (q[:, 0] >= 0) & (q[:, 0] <= w) & (q[:, 1] >= 0) & (q[:, 1] <= h)
         if seen.sum() < 2:
             continue
-        d = np.full(seen.sum(), np.inf)
-        for r in rails:
-            r = r[np.isfinite(r).all(1)]
-            if len(r) >= 2:
-                d = np.minimum(d, np.abs(_signed_distance(q[seen], r)))
+        d = _distance_to_polylines(q[seen], rails)
         out[i] = np.mean(d * scale <= CONFUSION_PX) >= CONFUSION_SHARE
     return out
 
@@ -369,12 +379,9 @@ def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: floa
     working px. A right fit explains nearly all of them; a fit that laid the court's near lines on the
     walls' rails leaves the real painted lines unexplained inside it."""
     segs = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2, 3) for v in court.lines.values()])
-    s = np.linspace(0.0, 1.0, n)[None, :, None]
-    polys = cam.project((segs[:, :1] + s * (segs[:, 1:] - segs[:, :1])).reshape(-1, 3)).reshape(len(segs), n, 2)
-    x0, y0, (x1, y1) = 0.0, 0.0, court.size[:2]
-    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
-    edge = np.concatenate([a + s[0] * (b - a) for a, b in zip(corners[:-1], corners[1:])])
-    outline = cam.project(np.concatenate([edge, np.zeros((len(edge), 1))], axis=1))
+    x1, y1 = court.size[:2]
+    corners = np.array([[0.0, 0.0, 0.0], [x1, 0.0, 0.0], [x1, y1, 0.0], [0.0, y1, 0.0]])
+    outline = _projected_polylines(cam, np.stack([corners, np.roll(corners, -1, axis=0)], axis=1), n).reshape(-1, 2)
     if not np.isfinite(outline).all():
         return float("nan")
     h, w = ev.mask.shape
@@ -384,11 +391,7 @@ def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: floa
     if len(xs) < 20:
         return float("nan")
     pix = (np.stack([xs, ys], axis=1) + 0.5) / ev.scale - 0.5
-    d = np.full(len(pix), np.inf)
-    for poly in polys:
-        poly = poly[np.isfinite(poly).all(1)]
-        if len(poly) >= 2:
-            d = np.minimum(d, np.abs(_signed_distance(pix, poly)))
+    d = _distance_to_polylines(pix, _projected_polylines(cam, segs, n))
     return float(np.mean(d * ev.scale > band_px))
 
 
@@ -451,18 +454,20 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     best = _with_distortion(cands[0], model, pixels, ev, distortion)
     best = _without_rail(best, model, pixels, ev)
     others = [c for c in cands[1:] if not c.same_as(cands[0], model)]
-    if not confused_segments(best.camera, model, scale).any():
+    best_confused = confused_segments(best.camera, model, scale)
+    if not best_confused.any():
         # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court
         others = [c for c in others if not confused_segments(c.camera, model, scale).any()]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
-    _judge(out, best, margin, ev, court, model, pixels)
+    _judge(out, best, margin, best_confused, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0
     return out
 
 
-def _judge(out: AutoFit, best: _Candidate, margin: float, ev: LineEvidence, court: Court, model: CourtLines,
-           pixels: np.ndarray) -> None:
-    """Fill the fit's figures, confidence and gate decision."""
+def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, ev: LineEvidence, court: Court,
+           model: CourtLines, pixels: np.ndarray) -> None:
+    """Fill the fit's figures, confidence and gate decision (``confused``: (S,) :func:`confused_segments`
+    of the fit's camera)."""
     cam = best.camera
     out.camera = cam
     out.coverage = best.hits / max(best.visible, 1)
@@ -487,7 +492,6 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, ev: LineEvidence, cour
     min_margin = MIN_MARGIN if best.confused is None else MIN_MARGIN_RAIL
     if margin < min_margin:
         problems.append(f"another placement of the court fits almost as well (margin {margin:.2f})")
-    confused = confused_segments(cam, model, ev.scale)
     if confused.any() and best.confused is None:
         problems.append(f"{int(confused.sum())} painted line(s) run along the near wall's top rail in the image, so "
                         "the fit cannot tell the paint from the rail")
