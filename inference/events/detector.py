@@ -7,7 +7,7 @@ Example:
 
 A model file (``*.pth.tar``, loaded with ``weights_only=True``) is a dict:
 ``format = "rally3d-events"``, ``kind`` (``hitnet`` | ``physics`` | ``crop``), ``class_set`` (dict), ``features``
-(dict), ``window``, ``last_k``, ``net`` (HitNet hyper-parameters), ``state_dict``, ``decode`` (the tuned
+(dict), ``window``, ``last_k``, ``lookahead`` (frames after the label block, default 0), ``net`` (HitNet hyper-parameters), ``state_dict``, ``decode`` (the tuned
 decoder) and ``physics`` (parameters of the physics detector), plus ``meta`` (training data, metrics).
 A ``crop`` model (:mod:`.crop`) also stores ``crop`` (its :class:`~.crop.CropConfig`) and needs the clip's
 frames: ``predict(..., frames=clip.frames())``.
@@ -30,6 +30,7 @@ from .classes import ClassSet
 from .decode import DecodeParams, decode
 from .features import (
     FeatureConfig,
+    check_label_block,
     clip_features,
     dense_xy,
     from_ref_frames,
@@ -133,23 +134,23 @@ class EventDetector:
     Args:
         kind: ``hitnet`` or ``physics``.
         class_set, features, decode_params: see their classes.
-        net: the HitNet (``kind == 'hitnet'``); window, last_k: its window length and label block.
+        net: the HitNet (``kind == 'hitnet'``); window, last_k, lookahead: its window length, label block
+            and the frames after the block (:func:`~.features.window_labels`).
         physics: parameters of the physics detector.
         meta: free-form provenance (training data, metrics).
     """
 
     def __init__(self, kind: str, class_set: ClassSet, features: FeatureConfig, decode_params: DecodeParams, *,
                  net: HitNet | None = None, window: int = 12, last_k: int = 6,
-                 physics: PhysicsParams | None = None, meta: dict | None = None, crop=None):
+                 lookahead: int = 0, physics: PhysicsParams | None = None, meta: dict | None = None, crop=None):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
         if kind in ("hitnet", "crop") and net is None:
             raise ValueError(f"a {kind} detector needs its network")
-        if not 1 <= last_k <= window:
-            raise ValueError(f"need 1 <= last_k <= window, got last_k={last_k}, window={window}")
+        check_label_block(window, last_k, lookahead)
         self.kind, self.class_set, self.features, self.decode_params = kind, class_set, features, decode_params
         self.net = net.eval() if net is not None else None
-        self.window, self.last_k = int(window), int(last_k)
+        self.window, self.last_k, self.lookahead = int(window), int(last_k), int(lookahead)
         self.physics = physics or PhysicsParams()
         self.meta = meta or {}
         self.crop = crop  # CropConfig of a crop model
@@ -178,12 +179,12 @@ class EventDetector:
             net.load_state_dict(blob["state_dict"])
         return cls(blob["kind"], class_set, features, DecodeParams.from_dict(blob["decode"]), net=net,
                    window=int(blob.get("window", 12)), last_k=int(blob.get("last_k", 6)),
-                   physics=PhysicsParams(**blob.get("physics", {})), meta=dict(blob.get("meta", {})), crop=crop)
+                   lookahead=int(blob.get("lookahead", 0)), physics=PhysicsParams(**blob.get("physics", {})), meta=dict(blob.get("meta", {})), crop=crop)
 
     def to_blob(self) -> dict[str, Any]:
         return {"format": FORMAT, "kind": self.kind, "class_set": self.class_set.to_dict(),
                 "features": self.features.to_dict(), "window": self.window, "last_k": self.last_k,
-                "net": dict(self.net.hparams) if self.net is not None else {},
+                "lookahead": self.lookahead, "net": dict(self.net.hparams) if self.net is not None else {},
                 "state_dict": self.net.state_dict() if self.net is not None else {},
                 "decode": self.decode_params.to_dict(), "physics": self.physics.to_dict(), "meta": self.meta,
                 **({"crop": self.crop.to_dict()} if self.crop is not None else {})}
@@ -224,10 +225,10 @@ class EventDetector:
             xy = resample_xy(dense_xy(ball, n_frames), fps, self.ref_fps)
             crops = extract_crops(frames, xy, fps, self.ref_fps, self.crop, n_frames)
             return window_probs_to_frames(self.net.clip_probs(feats, crops, self.window), len(feats), self.window,
-                                          self.last_k)
+                                          self.last_k, self.lookahead)
         wins = torch.from_numpy(make_windows(feats, self.window))
         win_probs = self.net.probs(wins).numpy().astype(np.float64)
-        return window_probs_to_frames(win_probs, len(feats), self.window, self.last_k)
+        return window_probs_to_frames(win_probs, len(feats), self.window, self.last_k, self.lookahead)
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
                 players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,

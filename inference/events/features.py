@@ -320,21 +320,33 @@ def make_windows(feats: np.ndarray, window: int) -> np.ndarray:
     return padded[idx]
 
 
-def window_probs_to_frames(win_probs: np.ndarray, n: int, window: int, last_k: int) -> np.ndarray:
+def check_label_block(window: int, last_k: int, lookahead: int = 0) -> None:
+    """Raise ``ValueError`` unless the label block (K frames ending ``lookahead`` frames before the
+    window's end) fits in a window of W frames: ``1 <= K`` and ``K + lookahead <= W``."""
+    if not (1 <= last_k and 0 <= lookahead and last_k + lookahead <= window):
+        raise ValueError(f"need 1 <= last_k, 0 <= lookahead and last_k + lookahead <= window, got "
+                         f"last_k={last_k}, lookahead={lookahead}, window={window}")
+
+
+def window_probs_to_frames(win_probs: np.ndarray, n: int, window: int, last_k: int,
+                           lookahead: int = 0) -> np.ndarray:
     """``(T + W + 1, C)`` window probabilities → ``(T, C)`` per frame: frame t is the mean of the K
-    windows whose last-K block covers it (padded starts ``t + 1 .. t + K``)."""
+    windows whose label block covers it (padded starts ``t + L + 1 .. t + L + K``, L = ``lookahead``)."""
+    check_label_block(window, last_k, lookahead)
     c = np.cumsum(np.concatenate([np.zeros((1, win_probs.shape[1])), win_probs]), axis=0)
-    t = np.arange(n)
+    t = np.arange(n) + lookahead
     return (c[t + last_k + 1] - c[t + 1]) / last_k
 
 
-def window_labels(y: np.ndarray, window: int, last_k: int) -> np.ndarray:
-    """``(T,)`` per-frame classes → ``(T + W + 1,)`` window labels: the event in the window's last K
-    frames (the latest one when several; 0 when none)."""
+def window_labels(y: np.ndarray, window: int, last_k: int, lookahead: int = 0) -> np.ndarray:
+    """``(T,)`` per-frame classes → ``(T + W + 1,)`` window labels: the event in the window's label
+    block — its K frames that end ``lookahead`` (L) frames before the window's end, so that the network
+    also sees L frames after the event (the latest event when several; 0 when none)."""
+    check_label_block(window, last_k, lookahead)
     padded = np.concatenate([np.zeros(window, y.dtype), y, np.zeros(window, y.dtype)])
     starts = window_starts(len(y), window)
-    idx = starts[:, None] + np.arange(window - last_k, window)[None]
-    block = padded[idx]
+    first = window - lookahead - last_k
+    block = padded[starts[:, None] + np.arange(first, first + last_k)[None]]
     has = block > 0
-    last = np.where(has.any(axis=1), window - last_k + (last_k - 1 - np.argmax(has[:, ::-1], axis=1)), 0)
+    last = np.where(has.any(axis=1), first + (last_k - 1 - np.argmax(has[:, ::-1], axis=1)), 0)
     return np.where(has.any(axis=1), padded[starts + last], 0)

@@ -23,8 +23,8 @@ from torch.utils.data import DataLoader, Dataset, Sampler
 from inference.clipio import Clip, FormatError
 from inference.court import load_court
 from inference.events.classes import ClassSet
-from inference.events.features import (FeatureConfig, clip_features, make_windows, to_ref_frames, window_labels,
-                                       window_starts)
+from inference.events.features import (FeatureConfig, check_label_block, clip_features, make_windows, to_ref_frames,
+                                       window_labels, window_starts)
 
 from .degrade import DegradeConfig, degrade_all
 from .pose_noise import PoseNoiseConfig, noisy_all
@@ -129,16 +129,16 @@ def _sim_clip(clip: Clip, with_players: bool = False) -> SimClip:
 
 
 # ------------------------------------------------------------------------------------------- windows
-def clip_windows(lc: LabelledClip, window: int, last_k: int) -> tuple[np.ndarray, np.ndarray]:
+def clip_windows(lc: LabelledClip, window: int, last_k: int, lookahead: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """All windows of a clip: ``(N, W, F)`` features and ``(N,)`` labels."""
-    return make_windows(lc.feats, window), window_labels(lc.y, window, last_k)
+    return make_windows(lc.feats, window), window_labels(lc.y, window, last_k, lookahead)
 
 
 class WindowSet(Dataset):
     """Windows of many clips held in memory: ``x (N, W, F) float32``, ``y (N,) int64``."""
 
-    def __init__(self, clips: list[LabelledClip], window: int, last_k: int):
-        xs, ys = zip(*(clip_windows(c, window, last_k) for c in clips)) if clips else ((), ())
+    def __init__(self, clips: list[LabelledClip], window: int, last_k: int, lookahead: int = 0):
+        xs, ys = zip(*(clip_windows(c, window, last_k, lookahead) for c in clips)) if clips else ((), ())
         self.x = torch.from_numpy(np.concatenate(xs).astype(np.float32)) if xs else torch.zeros(0, window, 1)
         self.y = torch.from_numpy(np.concatenate(ys)) if ys else torch.zeros(0, dtype=torch.long)
 
@@ -300,7 +300,8 @@ class EventDataModule(L.LightningDataModule):
 
     Args:
         sport, class_set: the class set (name or dict); features: :class:`FeatureConfig` fields.
-        window, last_k: W and K. source: ``synthetic`` or ``folder``; root: a dataset folder, a folder of
+        window, last_k, lookahead: W, K and L — a window's label is the event in its K frames that end
+            L frames before its end (L > 0 lets the network see the ball and players after the event). source: ``synthetic`` or ``folder``; root: a dataset folder, a folder of
             clip folders, or a list of these; root_weights: per root, its share of the training windows
             (None: by size); split_seed: seed of an inferred split (default ``seed``).
         n_train, n_val, n_test, seed: synthetic clip counts; seeds ``seed``, ``seed + 1``, ``seed + 2``.
@@ -317,7 +318,7 @@ class EventDataModule(L.LightningDataModule):
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
-                 window: int = 12, last_k: int = 6, source: str = "synthetic", root: str | None = None,
+                 window: int = 12, last_k: int = 6, lookahead: int = 0, source: str = "synthetic", root: str | None = None,
                  n_train: int = 600, n_val: int = 100, n_test: int = 200, seed: int = 0,
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
@@ -328,11 +329,14 @@ class EventDataModule(L.LightningDataModule):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
         if source == "folder" and not root:
             raise ValueError("data.source=folder needs data.root=DATASET_FOLDER")
-        if not 1 <= last_k <= window:
-            raise ValueError(f"need 1 <= last_k <= window, got {last_k}, {window}")
+        try:
+            check_label_block(window, last_k, lookahead)
+        except ValueError as e:
+            raise ValueError(f"data.window/last_k/lookahead: {e}") from None
         self.sport, self.class_set = sport, ClassSet.load(class_set)
         self.features = FeatureConfig.from_dict(features or {})
         self.window, self.last_k, self.source, self.root = window, last_k, source, root
+        self.lookahead = int(lookahead)
         self.root_weights, self.split_seed = root_weights, seed if split_seed is None else split_seed
         if not 0.0 <= float(around) <= 1.0:
             raise ValueError(f"data.around must be a fraction in [0, 1], got {around!r}")
@@ -436,14 +440,14 @@ class EventDataModule(L.LightningDataModule):
                 clips = self.degraded("train", 0)
             elif self.degrade.enabled and split == "val":
                 clips = clips + [c for k in range(int(self.degrade.val_copies)) for c in self.degraded("val", k)]
-            self.sets[split] = WindowSet(clips, self.window, self.last_k)
+            self.sets[split] = WindowSet(clips, self.window, self.last_k, self.lookahead)
 
     def redraw(self) -> None:
         """New degraded tracks for the training windows (in place: same windows, same labels); the first
         call keeps the draw made by :meth:`setup`."""
         if self._draw > 0:
             ds = self.sets["train"]
-            ds.x = WindowSet(self.degraded("train", self._draw), self.window, self.last_k).x
+            ds.x = WindowSet(self.degraded("train", self._draw), self.window, self.last_k, self.lookahead).x
         self._draw += 1
 
     def train_dataloader(self):

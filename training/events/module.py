@@ -63,12 +63,12 @@ class HitNetModule(L.LightningModule):
     """Args:
         class_set: name or dict; features: :class:`FeatureConfig` fields (must match the data's).
         hidden, layers, bidirectional, dropout: the network. lr, weight_decay, clip_norm: Adam (MonoTrack:
-        lr 1e-2, clipnorm 2). window, last_k: stored for export. augment: :class:`AugmentConfig` fields.
+        lr 1e-2, clipnorm 2). window, last_k, lookahead: stored for export. augment: :class:`AugmentConfig` fields.
     """
 
     def __init__(self, class_set: str | dict = "padel6", features: dict | None = None, hidden: int = 64,
                  layers: int = 2, bidirectional: bool = True, dropout: float = 0.0, lr: float = 3e-3,
-                 weight_decay: float = 0.0, window: int = 12, last_k: int = 6, augment: dict | None = None,
+                 weight_decay: float = 0.0, window: int = 12, last_k: int = 6, lookahead: int = 0, augment: dict | None = None,
                  lr_patience: int = 3, freeze: list[str] | None = None):
         super().__init__()
         self.save_hyperparameters()

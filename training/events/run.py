@@ -37,12 +37,12 @@ log = logging.getLogger(__name__)
 def detector_from_module(module, dm: EventDataModule, decode: DecodeParams | None = None,
                          meta: dict | None = None) -> EventDetector:
     return EventDetector("hitnet", dm.class_set, dm.features, decode or DecodeParams(), net=module.net,
-                         window=dm.window, last_k=dm.last_k, meta=meta or {})
+                         window=dm.window, last_k=dm.last_k, lookahead=dm.lookahead, meta=meta or {})
 
 
 def calibrate(module, dm: EventDataModule, max_windows: int = 200_000) -> float:
     """Fit the temperature on (up to ``max_windows``) validation windows; stored in the network."""
-    ds = dm.sets.get("val") or WindowSet(dm.labelled("val"), dm.window, dm.last_k)
+    ds = dm.sets.get("val") or WindowSet(dm.labelled("val"), dm.window, dm.last_k, dm.lookahead)
     idx = torch.randperm(len(ds), generator=torch.Generator().manual_seed(0))[:max_windows]
     module.net.eval()
     with torch.no_grad():
@@ -155,8 +155,10 @@ def init_events(module, path: str | Path, dm: EventDataModule | None = None) -> 
     blob = load_model_file(path)
     if dm is not None:
         wanted = {"data.window": blob.get("window"), "data.last_k": blob.get("last_k"),
+                  "data.lookahead": blob.get("lookahead", 0),
                   "data.class_set": blob["class_set"].get("name")}
-        have = {"data.window": dm.window, "data.last_k": dm.last_k, "data.class_set": dm.class_set.name}
+        have = {"data.window": dm.window, "data.last_k": dm.last_k, "data.lookahead": dm.lookahead,
+                "data.class_set": dm.class_set.name}
         feats = FeatureConfig.from_model_file(blob["features"]).to_dict()
         wanted.update({f"data.features.{k}": v for k, v in feats.items()})
         have.update({f"data.features.{k}": v for k, v in dm.features.to_dict().items()})

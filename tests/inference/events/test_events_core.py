@@ -10,6 +10,7 @@ from inference.events.features import (
     FeatureConfig,
     ball_features,
     clip_features,
+    make_windows,
     resample_xy,
     window_labels,
     window_probs_to_frames,
@@ -75,6 +76,24 @@ def test_windows_label_the_last_k_frames_and_recover_event_frames():
     assert starts.tolist() == list(range(11, 17))
     per_frame = window_probs_to_frames(np.eye(5)[wl], len(y), 12, 6)
     assert per_frame[:, 2].argmax() == 10 and per_frame[:, 3].argmax() == 25
+
+
+def test_lookahead_puts_frames_after_the_event_in_the_window_and_maps_back():
+    y = np.zeros(40, np.int64)
+    y[[3, 10, 36]] = [2, 3, 4]
+    window, k, look = 20, 6, 8
+    wl = window_labels(y, window, k, look)
+    starts = np.flatnonzero(wl == 3)  # the block [W-L-K, W-L) covers t = 10: padded starts t+L+1 .. t+L+K
+    assert starts.tolist() == list(range(10 + look + 1, 10 + look + k + 1))
+    windows = make_windows(np.arange(40, dtype=float)[:, None], window)
+    for s in starts:  # every labelled window sees the event and the L frames after it
+        real = windows[s, :, 0][windows[s, :, 0] > 0]
+        assert 10 in real and (10 + look) in real
+    per_frame = window_probs_to_frames(np.eye(5)[wl], len(y), window, k, look)
+    assert [int(per_frame[:, c].argmax()) for c in (2, 3, 4)] == [3, 10, 36]
+    assert np.allclose(per_frame.sum(axis=1), 1.0)
+    with pytest.raises(ValueError, match="lookahead"):
+        window_labels(y, 12, 6, 7)
 
 
 def test_perfect_probabilities_decode_to_the_true_events(padel_clips):
