@@ -239,6 +239,11 @@ class _Candidate:
     def net_coverage(self) -> float:
         return self.net[0] / self.net[1] if self.net[1] > 0 else float("nan")
 
+    @property
+    def net_found(self) -> bool:
+        """The net's top is where this placement puts it (or too little of it is in view to tell)."""
+        return self.net[1] < MIN_NET_PX or self.net_coverage >= MIN_NET_COVERAGE
+
     def same_as(self, other: _Candidate, model: CourtLines) -> bool:
         """Whether both put the court's lines at the same place in the image (every floor crossing this
         camera sees within 0.6 % of the larger image side): one placement, not a rival one."""
@@ -390,9 +395,26 @@ def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: floa
     ys, xs = np.nonzero(ev.mask & floor.astype(bool))
     if len(xs) < 20:
         return float("nan")
-    pix = (np.stack([xs, ys], axis=1) + 0.5) / ev.scale - 0.5
-    d = _distance_to_polylines(pix, _projected_polylines(cam, segs, n))
-    return float(np.mean(d * ev.scale > band_px))
+    d = _line_distance_map(_projected_polylines(cam, segs, n), ev.scale, (h, w))
+    return float(np.mean(d[ys, xs] > band_px))
+
+
+def _line_distance_map(polys: np.ndarray, scale: float, shape: tuple[int, int], subpixel: int = 4) -> np.ndarray:
+    """(P, K, 2) image polylines (full-resolution px, NaN where unseen) → (h, w) float32 distance (working
+    px) from every working-image pixel to the nearest drawn polyline (lines drawn 1 px wide from sub-pixel
+    ends, then a Euclidean distance transform: within ~1 px of the exact distance; pieces far outside the
+    image are left out, and a pixel near the border does not see a line just outside it)."""
+    h, w = shape
+    canvas = np.full((h, w), 255, np.uint8)
+    q = (polys + 0.5) * scale - 0.5
+    far = 4.0 * max(h, w)
+    keep = np.isfinite(q).all(axis=2) & (np.abs(q) < far).all(axis=2)
+    fixed = np.round(np.nan_to_num(q) * (1 << subpixel)).astype(np.int32)
+    for poly, ok in zip(fixed, keep):
+        for a, b in zip(np.flatnonzero(ok[:-1] & ok[1:]), np.flatnonzero(ok[:-1] & ok[1:]) + 1):
+            cv2.line(canvas, tuple(int(v) for v in poly[a]), tuple(int(v) for v in poly[b]), 0, 1, cv2.LINE_8,
+                     subpixel)
+    return cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
 
 
 def _without_rail(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence) -> _Candidate:
@@ -451,17 +473,36 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
         out.cpu_seconds = time.process_time() - t0
         return out
     cands.sort(key=lambda c: -c.score)
-    best = _with_distortion(cands[0], model, pixels, ev, distortion)
+    placeable = _Placeable(court, ev)
+    lead = next((c for c in cands if placeable(c)), cands[0])
+    best = _with_distortion(lead, model, pixels, ev, distortion)
     best = _without_rail(best, model, pixels, ev)
-    others = [c for c in cands[1:] if not c.same_as(cands[0], model)]
+    others = [c for c in cands if c is not lead and not c.same_as(lead, model)]
     best_confused = confused_segments(best.camera, model, scale)
     if not best_confused.any():
-        # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court
-        others = [c for c in others if not confused_segments(c.camera, model, scale).any()]
+        # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court;
+        # nor is one the gate would refuse on its own (the net not where it puts it, most floor paint unexplained)
+        others = [c for c in others if not confused_segments(c.camera, model, scale).any() and placeable(c)]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, best_confused, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0
     return out
+
+
+class _Placeable:
+    """Whether a candidate placement passes the gate's placement tests on its own: the net found where it
+    puts it, and at most ``MAX_UNEXPLAINED`` of the line pixels on its floor on none of its lines (cached
+    per candidate)."""
+
+    def __init__(self, court: Court, ev: LineEvidence):
+        self.court, self.ev, self._memo = court, ev, {}
+
+    def __call__(self, cand: _Candidate) -> bool:
+        key = id(cand)
+        if key not in self._memo:
+            un = unexplained_share(cand.camera, self.court, self.ev) if cand.net_found else float("nan")
+            self._memo[key] = bool(cand.net_found and not un > MAX_UNEXPLAINED)
+        return self._memo[key]
 
 
 def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, ev: LineEvidence, court: Court,
@@ -487,7 +528,7 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, 
         problems.append(f"line pixels {out.line_rms_px:.1f} px from the fitted lines")
     if min(out.lines_supported) < MIN_LINES_PER_KIND:
         problems.append(f"too few lines supported ({out.lines_supported[0]} across, {out.lines_supported[1]} along)")
-    if best.net[1] >= MIN_NET_PX and best.net_coverage < MIN_NET_COVERAGE:
+    if not best.net_found:
         problems.append(f"the net is not where the fit puts it ({100 * best.net_coverage:.0f} % found)")
     min_margin = MIN_MARGIN if best.confused is None else MIN_MARGIN_RAIL
     if margin < min_margin:
