@@ -23,6 +23,7 @@ TRANSVERSE_MAX_DEG = 32.0
 LONGITUDINAL_MIN_DEG = 18.0
 MAX_LINES_PER_KIND = 10
 N_BANDS = 6  # the image is split in this many bands across each kind of line (see _separated)
+MAX_PER_BAND = 3  # lines kept per band (see _separated)
 MIN_SEPARATION = 0.008  # of the larger image side: closer lines count as one (see _separated)
 HIT_PX = 1.5  # working px: a projected model point this close to a line pixel is supported
 MISS_WEIGHT = 0.5
@@ -43,8 +44,8 @@ class Hypothesis:
 
 
 def split_lines(lines: list[ImageLine], size: tuple[int, int]) -> tuple[list[ImageLine], list[ImageLine]]:
-    """Transverse lines (top of the image first) and longitudinal lines (left first), the strongest
-    :data:`MAX_LINES_PER_KIND` of each."""
+    """Transverse lines (top of the image first) and longitudinal lines (left first), the strongest of each
+    spread over the image (:func:`_separated`)."""
     w, h = size
     by_votes = sorted(lines, key=lambda k: -k.votes)
     y_mid = lambda k: (k.offset - k.normal[0] * w / 2) / k.normal[1]  # noqa: E731  (y at the image's middle)
@@ -59,9 +60,11 @@ def split_lines(lines: list[ImageLine], size: tuple[int, int]) -> tuple[list[Ima
 
 def _separated(lines: list[ImageLine], size: tuple[int, int], position: Callable[[ImageLine], float],
                extent: float) -> list[ImageLine]:
-    """At most :data:`MAX_LINES_PER_KIND` lines, strongest first, in two passes: the strongest line of each of
-    :data:`N_BANDS` bands of ``position`` (the image split across the lines' direction, so weak far lines
-    are kept) and then the rest by votes. A line within :data:`MIN_SEPARATION` × the larger image side of a
+    """Lines in two passes: the strongest line of each of :data:`N_BANDS` bands of ``position`` (the image
+    split across the lines' direction, so weak far lines are kept) and then the rest by votes, up to
+    :data:`MAX_LINES_PER_KIND`; then the lines the same selection adds when it keeps at most
+    :data:`MAX_PER_BAND` per band (the many strong lines of a fence's mesh in one band must not crowd out
+    the court's weaker lines elsewhere) — at most twice :data:`MAX_LINES_PER_KIND` in all. A line within :data:`MIN_SEPARATION` × the larger image side of a
     kept one (median over the image) is skipped: a fence's mesh or a thick rail gives many near-duplicates."""
     w, h = size
     probes = np.stack(np.meshgrid(np.linspace(0, w, 5), np.linspace(0, h, 5)), -1).reshape(-1, 2)
@@ -73,19 +76,28 @@ def _separated(lines: list[ImageLine], size: tuple[int, int], position: Callable
         inside = on_k[(on_k >= 0).all(1) & (on_k[:, 0] <= w) & (on_k[:, 1] <= h)]
         return not (len(inside) and any(np.median(o.distance(inside)) < sep for o in kept))
 
-    bands: set[int] = set()
-    for k in lines:  # pass 1: the strongest line per band
-        b = int(np.clip(position(k) / extent * N_BANDS, 0, N_BANDS - 1)) if np.isfinite(position(k)) else -1
-        if b not in bands and distinct(k):
-            bands.add(b)
-            kept.append(k)
-    kept = kept[:MAX_LINES_PER_KIND]
-    for k in lines:  # pass 2: by votes
-        if len(kept) >= MAX_LINES_PER_KIND:
-            break
-        if all(k is not o for o in kept) and distinct(k):
-            kept.append(k)
-    return kept
+    def band(k: ImageLine) -> int:
+        return int(np.clip(position(k) / extent * N_BANDS, 0, N_BANDS - 1)) if np.isfinite(position(k)) else -1
+
+    def select(cap: int | None) -> list[ImageLine]:
+        kept.clear()
+        per_band: dict[int, int] = {}
+        for k in lines:  # pass 1: the strongest line per band
+            if band(k) not in per_band and distinct(k):
+                per_band[band(k)] = 1
+                kept.append(k)
+        del kept[MAX_LINES_PER_KIND:]
+        for k in lines:  # pass 2: by votes (at most ``cap`` per band)
+            if len(kept) >= MAX_LINES_PER_KIND:
+                break
+            if all(k is not o for o in kept) and (cap is None or per_band.get(band(k), 0) < cap) and distinct(k):
+                per_band[band(k)] = per_band.get(band(k), 0) + 1
+                kept.append(k)
+        return list(kept)
+
+    by_votes = select(None)
+    spread = select(MAX_PER_BAND)  # a fence's mesh can fill one band with strong lines
+    return by_votes + [k for k in spread if all(k is not o for o in by_votes)]
 
 
 def _batch_homography(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -94,16 +94,19 @@ def test_near_rail_marks_the_painted_line_it_runs_along():
     assert len(tennis.structure) == 0 and not confused_segments(installed, tennis, 1.0).any()
 
 
-@pytest.mark.parametrize("seed, accepted, why", [(519, False, "another placement"), (613, False, "lie on none"),
-                                                 (517, True, ""), (507, True, ""), (501, True, ""), (711, True, "")])
+@pytest.mark.parametrize("seed, accepted, why", [(519, False, "another placement"), (617, False, "lie on none"),
+                                                 (517, True, ""), (507, True, ""), (501, True, ""), (711, True, ""),
+                                                 (613, True, "")])
 def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed, accepted, why):
     """The bench's installed padel views (drawn size, half with lens distortion): 519 — the rail hides the near
-    service line and a rival placement is close: refused; 613 — the court's near lines laid on the walls'
-    rails leave the real painted lines unexplained on its floor: refused; 517 — the rail runs along the near
+    service line and a rival placement is close: refused; 617 — the best placement found is 5 px off (the
+    near service line on the rail) and leaves half the painted line pixels on its floor unexplained:
+    refused; 517 — the rail runs along the near
     service line, fitted with the rails as lines of their own; 507 — mild barrel distortion, k1 kept; 501 — the
     best-scoring placement lays the court on the rails (its floor paint unexplained), the next one is right;
     711 — the only close rival would itself be refused (most of its floor paint unexplained), so it is no
-    rival. An accepted fit is always within the goals; a refused one says why."""
+    rival; 613 — the near fence's mesh gives many strong transverse lines in one band of the image, which
+    must not crowd out the court's far lines (before, the court was laid on the rails and refused). An accepted fit is always within the goals; a refused one says why."""
     scene = SynthScene.build(seed, SynthConfig(sport="padel", camera="padel_installed"))
     frames = [scene.frame(i)[0] for i in sample_frame_indices(scene.rally.n_frames, 9)]
     fit = fit_court_frames(frames, scene.court)
