@@ -473,8 +473,7 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
         out.cpu_seconds = time.process_time() - t0
         return out
     cands.sort(key=lambda c: -c.score)
-    placeable = _Placeable(court, ev)
-    lead = next((c for c in cands if placeable(c)), cands[0])
+    lead = next((c for c in cands if _placeable(c, court, ev)), cands[0])
     best = _with_distortion(lead, model, pixels, ev, distortion)
     best = _without_rail(best, model, pixels, ev)
     others = [c for c in cands if c is not lead and not c.same_as(lead, model)]
@@ -482,27 +481,18 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     if not best_confused.any():
         # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court;
         # nor is one the gate would refuse on its own (the net not where it puts it, most floor paint unexplained)
-        others = [c for c in others if not confused_segments(c.camera, model, scale).any() and placeable(c)]
+        others = [c for c in others
+                  if not confused_segments(c.camera, model, scale).any() and _placeable(c, court, ev)]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, best_confused, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0
     return out
 
 
-class _Placeable:
+def _placeable(cand: _Candidate, court: Court, ev: LineEvidence) -> bool:
     """Whether a candidate placement passes the gate's placement tests on its own: the net found where it
-    puts it, and at most ``MAX_UNEXPLAINED`` of the line pixels on its floor on none of its lines (cached
-    per candidate)."""
-
-    def __init__(self, court: Court, ev: LineEvidence):
-        self.court, self.ev, self._memo = court, ev, {}
-
-    def __call__(self, cand: _Candidate) -> bool:
-        key = id(cand)
-        if key not in self._memo:
-            un = unexplained_share(cand.camera, self.court, self.ev) if cand.net_found else float("nan")
-            self._memo[key] = bool(cand.net_found and not un > MAX_UNEXPLAINED)
-        return self._memo[key]
+    puts it, and at most ``MAX_UNEXPLAINED`` of the line pixels on its floor on none of its lines."""
+    return cand.net_found and not unexplained_share(cand.camera, court, ev) > MAX_UNEXPLAINED
 
 
 def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, ev: LineEvidence, court: Court,

@@ -64,14 +64,14 @@ def _separated(lines: list[ImageLine], size: tuple[int, int], position: Callable
     split across the lines' direction, so weak far lines are kept) and then the rest by votes, up to
     :data:`MAX_LINES_PER_KIND`; then the lines the same selection adds when it keeps at most
     :data:`MAX_PER_BAND` per band (the many strong lines of a fence's mesh in one band must not crowd out
-    the court's weaker lines elsewhere) — at most twice :data:`MAX_LINES_PER_KIND` in all. A line within :data:`MIN_SEPARATION` × the larger image side of a
-    kept one (median over the image) is skipped: a fence's mesh or a thick rail gives many near-duplicates."""
+    the court's weaker lines elsewhere) — at most twice :data:`MAX_LINES_PER_KIND` in all. A line within
+    :data:`MIN_SEPARATION` × the larger image side of a kept one (median over the image) is skipped: a
+    fence's mesh or a thick rail gives many near-duplicates."""
     w, h = size
     probes = np.stack(np.meshgrid(np.linspace(0, w, 5), np.linspace(0, h, 5)), -1).reshape(-1, 2)
     sep = MIN_SEPARATION * max(w, h)
-    kept: list[ImageLine] = []
 
-    def distinct(k: ImageLine) -> bool:
+    def distinct(k: ImageLine, kept: list[ImageLine]) -> bool:
         on_k = probes - np.outer(probes @ k.normal - k.offset, k.normal)  # probes moved onto k
         inside = on_k[(on_k >= 0).all(1) & (on_k[:, 0] <= w) & (on_k[:, 1] <= h)]
         return not (len(inside) and any(np.median(o.distance(inside)) < sep for o in kept))
@@ -80,20 +80,21 @@ def _separated(lines: list[ImageLine], size: tuple[int, int], position: Callable
         return int(np.clip(position(k) / extent * N_BANDS, 0, N_BANDS - 1)) if np.isfinite(position(k)) else -1
 
     def select(cap: int | None) -> list[ImageLine]:
-        kept.clear()
+        kept: list[ImageLine] = []
         per_band: dict[int, int] = {}
         for k in lines:  # pass 1: the strongest line per band
-            if band(k) not in per_band and distinct(k):
+            if band(k) not in per_band and distinct(k, kept):
                 per_band[band(k)] = 1
                 kept.append(k)
         del kept[MAX_LINES_PER_KIND:]
         for k in lines:  # pass 2: by votes (at most ``cap`` per band)
             if len(kept) >= MAX_LINES_PER_KIND:
                 break
-            if all(k is not o for o in kept) and (cap is None or per_band.get(band(k), 0) < cap) and distinct(k):
-                per_band[band(k)] = per_band.get(band(k), 0) + 1
+            b = band(k)
+            if all(k is not o for o in kept) and (cap is None or per_band.get(b, 0) < cap) and distinct(k, kept):
+                per_band[b] = per_band.get(b, 0) + 1
                 kept.append(k)
-        return list(kept)
+        return kept
 
     by_votes = select(None)
     spread = select(MAX_PER_BAND)  # a fence's mesh can fill one band with strong lines

@@ -7,8 +7,8 @@ Example:
 
 A model file (``*.pth.tar``, loaded with ``weights_only=True``) is a dict:
 ``format = "rally3d-events"``, ``kind`` (``hitnet`` | ``physics`` | ``crop``), ``class_set`` (dict), ``features``
-(dict), ``window``, ``last_k``, ``lookahead`` (frames after the label block, default 0), ``net`` (HitNet hyper-parameters), ``state_dict``, ``decode`` (the tuned
-decoder) and ``physics`` (parameters of the physics detector), plus ``meta`` (training data, metrics).
+(dict), ``window``, ``last_k``, ``lookahead`` (frames after the label block, default 0), ``net`` (HitNet
+hyper-parameters), ``state_dict``, ``decode`` (the tuned decoder) and ``physics`` (parameters of the physics detector), plus ``meta`` (training data, metrics).
 A ``crop`` model (:mod:`.crop`) also stores ``crop`` (its :class:`~.crop.CropConfig`) and needs the clip's
 frames: ``predict(..., frames=clip.frames())``.
 """
@@ -179,7 +179,8 @@ class EventDetector:
             net.load_state_dict(blob["state_dict"])
         return cls(blob["kind"], class_set, features, DecodeParams.from_dict(blob["decode"]), net=net,
                    window=int(blob.get("window", 12)), last_k=int(blob.get("last_k", 6)),
-                   lookahead=int(blob.get("lookahead", 0)), physics=PhysicsParams(**blob.get("physics", {})), meta=dict(blob.get("meta", {})), crop=crop)
+                   lookahead=int(blob.get("lookahead", 0)), physics=PhysicsParams(**blob.get("physics", {})),
+                   meta=dict(blob.get("meta", {})), crop=crop)
 
     def to_blob(self) -> dict[str, Any]:
         return {"format": FORMAT, "kind": self.kind, "class_set": self.class_set.to_dict(),

@@ -301,8 +301,8 @@ class EventDataModule(L.LightningDataModule):
     Args:
         sport, class_set: the class set (name or dict); features: :class:`FeatureConfig` fields.
         window, last_k, lookahead: W, K and L — a window's label is the event in its K frames that end
-            L frames before its end (L > 0 lets the network see the ball and players after the event). source: ``synthetic`` or ``folder``; root: a dataset folder, a folder of
-            clip folders, or a list of these; root_weights: per root, its share of the training windows
+            L frames before its end (L > 0 lets the network see the ball and players after the event).
+        source: ``synthetic`` or ``folder``; root: a dataset folder, a folder of clip folders, or a list of these; root_weights: per root, its share of the training windows
             (None: by size); split_seed: seed of an inferred split (default ``seed``).
         n_train, n_val, n_test, seed: synthetic clip counts; seeds ``seed``, ``seed + 1``, ``seed + 2``.
         on_unmapped: ``error`` or ``warn`` for labels the class set does not cover.
@@ -318,7 +318,8 @@ class EventDataModule(L.LightningDataModule):
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
-                 window: int = 12, last_k: int = 6, lookahead: int = 0, source: str = "synthetic", root: str | None = None,
+                 window: int = 12, last_k: int = 6, lookahead: int = 0, source: str = "synthetic",
+                 root: str | None = None,
                  n_train: int = 600, n_val: int = 100, n_test: int = 200, seed: int = 0,
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
