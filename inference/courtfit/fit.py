@@ -43,6 +43,7 @@ MAX_LINE_RMS = 1.0  # working px
 MIN_MARGIN = 1.1
 MAX_UNEXPLAINED = 0.45  # of the line pixels inside the fitted court's floor, on none of its modelled lines
 MIN_MARGIN_RAIL = 1.2  # ... when a painted line runs along a near wall's top rail (less independent evidence)
+MIN_PINNED = 0.9  # ... and the painted line along the rail, or a rail, found along this share of its image
 MIN_LINES_PER_KIND = 2
 MIN_NET_COVERAGE = 0.7  # of the net top's visible image length, when it is at least MIN_NET_PX long
 MIN_NET_PX = 50.0
@@ -426,8 +427,15 @@ def _without_rail(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: L
     if not conf.any():
         return best
     n_dist = 0 if best.camera.dist is None else 1
-    segs = np.concatenate([model.segments_3d, model.structure])
-    cam, res, _ = refine_on_lines(best.camera, segs, pixels, ev.scale, n_dist=n_dist)
+    # two refits: all lines and the rails from the fit; and, when the confused paint has pulled the fit onto
+    # the rail's edge (the paint hidden behind it), out of the rails' reach: a refit without that paint first,
+    # then with the rails. The one that explains more line pixels is kept.
+    clear = model.segments_3d[~conf]
+    start, _, _ = refine_on_lines(best.camera, clear, pixels, ev.scale, n_dist=n_dist)
+    refits = [refine_on_lines(best.camera, np.concatenate([model.segments_3d, model.structure]), pixels, ev.scale,
+                              n_dist=n_dist),
+              refine_on_lines(start, np.concatenate([clear, model.structure]), pixels, ev.scale, n_dist=n_dist)]
+    cam, res, _ = max(refits, key=lambda r: len(r[1]))
     cand = _evaluate(cam, res, ev, model)
     cand.confused = conf
     return cand
@@ -476,13 +484,14 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     lead = next((c for c in cands if _placeable(c, court, ev)), cands[0])
     best = _with_distortion(lead, model, pixels, ev, distortion)
     best = _without_rail(best, model, pixels, ev)
-    others = [c for c in cands if c is not lead and not c.same_as(lead, model)]
+    # a rival counts only if the gate would not refuse it on its own (the net not where it puts it, most floor
+    # paint unexplained) ...
+    others = [c for c in cands if c is not lead and not c.same_as(lead, model) and _placeable(c, court, ev)]
     best_confused = confused_segments(best.camera, model, scale)
     if not best_confused.any():
-        # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court;
-        # nor is one the gate would refuse on its own (the net not where it puts it, most floor paint unexplained)
-        others = [c for c in others
-                  if not confused_segments(c.camera, model, scale).any() and _placeable(c, court, ev)]
+        # ... and, for a fit clear of the rails, one that lays a painted line on a near wall's top rail is the
+        # rail's echo, not another court
+        others = [c for c in others if not confused_segments(c.camera, model, scale).any()]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, best_confused, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0
@@ -493,6 +502,16 @@ def _placeable(cand: _Candidate, court: Court, ev: LineEvidence) -> bool:
     """Whether a candidate placement passes the gate's placement tests on its own: the net found where it
     puts it, and at most ``MAX_UNEXPLAINED`` of the line pixels on its floor on none of its lines."""
     return cand.net_found and not unexplained_share(cand.camera, court, ev) > MAX_UNEXPLAINED
+
+
+def _near_pinned(best: _Candidate, model: CourtLines, ev: LineEvidence) -> bool:
+    """For a fit refined with the near rails as lines of their own: whether the painted line(s) running along
+    a rail are found along :data:`MIN_PINNED` of their visible length, or a rail is (one at least
+    :data:`MIN_NET_PX` long in the image). Otherwise the near court is placed by the side lines' extrapolation
+    alone, a few pixels off (dark rails, the paint hidden behind them)."""
+    paint = [h / v for (_, h, v), c in zip(best.per_line, best.confused) if c and v > 0]
+    rails = [h / v for _, h, v in _support(best.camera, ev, model.structure) if v >= MIN_NET_PX]
+    return min(paint, default=1.0) >= MIN_PINNED or max(rails, default=0.0) >= MIN_PINNED
 
 
 def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, ev: LineEvidence, court: Court,
@@ -523,6 +542,9 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, 
     min_margin = MIN_MARGIN if best.confused is None else MIN_MARGIN_RAIL
     if margin < min_margin:
         problems.append(f"another placement of the court fits almost as well (margin {margin:.2f})")
+    if best.confused is not None and not _near_pinned(best, model, ev):
+        problems.append("the near service line runs along the near wall's top rail in the image and neither is "
+                        f"found along {100 * MIN_PINNED:.0f} % of its length, so nothing pins the near court")
     if confused.any() and best.confused is None:
         problems.append(f"{int(confused.sum())} painted line(s) run along the near wall's top rail in the image, so "
                         "the fit cannot tell the paint from the rail")
