@@ -484,14 +484,13 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     lead = next((c for c in cands if _placeable(c, court, ev)), cands[0])
     best = _with_distortion(lead, model, pixels, ev, distortion)
     best = _without_rail(best, model, pixels, ev)
-    # a rival counts only if the gate would not refuse it on its own (the net not where it puts it, most floor
-    # paint unexplained) ...
-    others = [c for c in cands if c is not lead and not c.same_as(lead, model) and _placeable(c, court, ev)]
+    others = [c for c in cands if c is not lead and not c.same_as(lead, model)]
     best_confused = confused_segments(best.camera, model, scale)
     if not best_confused.any():
-        # ... and, for a fit clear of the rails, one that lays a painted line on a near wall's top rail is the
-        # rail's echo, not another court
-        others = [c for c in others if not confused_segments(c.camera, model, scale).any()]
+        # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court;
+        # nor is one the gate would refuse on its own (the net not where it puts it, most floor paint unexplained)
+        others = [c for c in others
+                  if not confused_segments(c.camera, model, scale).any() and _placeable(c, court, ev)]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, best_confused, ev, court, model, pixels)
     out.cpu_seconds = time.process_time() - t0

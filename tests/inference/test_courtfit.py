@@ -95,18 +95,23 @@ def test_near_rail_marks_the_painted_line_it_runs_along():
 
 
 @pytest.mark.parametrize("seed, accepted, why", [(519, False, "another placement"), (617, False, "lie on none"),
+                                                 (1001, False, "nothing pins the near court"),
                                                  (517, True, ""), (507, True, ""), (501, True, ""), (711, True, ""),
                                                  (613, True, "")])
 def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed, accepted, why):
     """The bench's installed padel views (drawn size, half with lens distortion): 519 — the rail hides the near
-    service line and a rival placement is close: refused; 617 — the best placement found is 5 px off (the
-    near service line on the rail) and leaves half the painted line pixels on its floor unexplained:
-    refused; 517 — the rail runs along the near
+    service line, whose paint pulled the fit onto the rail's lower edge (5 px off); refitted from a fit
+    without that paint, the rails are reached and the camera is right, but a rival placement is close:
+    refused; 617 — the best placement found is 5 px off (the near service line on the rail) and leaves half
+    the painted line pixels on its floor unexplained: refused; 1001 — the near service line runs along the
+    rail and neither is found along its length (dark rails): the near court is placed by the side lines
+    alone, 3 px off: refused; 517 — the rail runs along the near
     service line, fitted with the rails as lines of their own; 507 — mild barrel distortion, k1 kept; 501 — the
     best-scoring placement lays the court on the rails (its floor paint unexplained), the next one is right;
     711 — the only close rival would itself be refused (most of its floor paint unexplained), so it is no
     rival; 613 — the near fence's mesh gives many strong transverse lines in one band of the image, which
-    must not crowd out the court's far lines (before, the court was laid on the rails and refused). An accepted fit is always within the goals; a refused one says why."""
+    must not crowd out the court's far lines (before, the court was laid on the rails and refused). An
+    accepted fit is always within the goals; a refused one says why."""
     scene = SynthScene.build(seed, SynthConfig(sport="padel", camera="padel_installed"))
     frames = [scene.frame(i)[0] for i in sample_frame_indices(scene.rally.n_frames, 9)]
     fit = fit_court_frames(frames, scene.court)
@@ -116,6 +121,8 @@ def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed
         assert fit.unexplained < 0.45
     else:
         assert why in fit.reason
+    if seed == 519:
+        assert _goals_met(fit, scene), "the refit without the hidden paint should reach the rails"
 
 
 def test_unexplained_share_is_low_for_the_true_camera_and_high_for_a_shifted_one():
@@ -157,13 +164,37 @@ def test_line_distance_map_agrees_with_the_exact_distance():
 
 
 # ------------------------------------------------------------------------------------------ the CLI
+@pytest.fixture(scope="module")
+def broadcast_source(tmp_path_factory) -> Path:
+    """A rendered padel broadcast clip (120 frames, 1280×720) with its clicked points and ground truth."""
+    out = tmp_path_factory.mktemp("broadcast")
+    assert main(["synth", "--sport", "padel", "--clips", "1", "--seed", "4", "--camera", "padel_broadcast",
+                 "--fixed-camera", "--size", "1280x720", "--max-frames", "120", "--out", str(out)]) == 0
+    return out / "clip_0000"
+
+
 @pytest.fixture
-def sample_clip(tmp_path) -> Path:
+def sample_clip(tmp_path, broadcast_source) -> Path:
+    """The broadcast clip without its camera and court points (what a user starts from)."""
     root = tmp_path / "clip"
-    shutil.copytree(SAMPLE, root)
+    shutil.copytree(broadcast_source, root)
     for name in ("camera.yaml", "court_points.csv"):
         (root / name).unlink(missing_ok=True)
     return root
+
+
+def test_calibrate_auto_refuses_the_demo_sample_and_says_why(tmp_path, capsys):
+    """The embedded sample's installed camera: the near service line is hidden behind the near glass's rail
+    and the dark rails are not found, so the fit (2.7 px off on the floor points) is refused; nothing is
+    written and the user is sent to click points."""
+    root = tmp_path / "sample"
+    shutil.copytree(SAMPLE, root)
+    for name in ("camera.yaml", "court_points.csv"):
+        (root / name).unlink(missing_ok=True)
+    assert main(["calibrate", str(root), "--auto"]) == 1
+    err = capsys.readouterr().err
+    assert "nothing pins the near court" in err and "rally3d label" in err
+    assert not (root / "camera.yaml").exists() and not (root / "court_points.csv").exists()
 
 
 def test_calibrate_auto_writes_camera_and_points_to_correct(sample_clip, capsys):
@@ -181,13 +212,13 @@ def test_calibrate_auto_writes_camera_and_points_to_correct(sample_clip, capsys)
     assert "plane calibration" in capsys.readouterr().out
 
 
-def test_calibrate_auto_leaves_clicked_points_alone(sample_clip, capsys):
-    clicked = (SAMPLE / "court_points.csv").read_text()
+def test_calibrate_auto_leaves_clicked_points_alone(sample_clip, broadcast_source, capsys):
+    clicked = (broadcast_source / "court_points.csv").read_text()
     (sample_clip / "court_points.csv").write_text(clicked)
-    assert main(["calibrate", str(sample_clip), "--auto", "--frames", "0,60,120,180"]) == 0
+    assert main(["calibrate", str(sample_clip), "--auto", "--frames", "0,40,80,110"]) == 0
     assert (sample_clip / "court_points.csv").read_text() == clicked
     assert (sample_clip / "court_points_auto.csv").is_file()
-    assert Camera.load(sample_clip / "camera.yaml").meta["auto"]["frames"] == [0, 60, 120, 180]
+    assert Camera.load(sample_clip / "camera.yaml").meta["auto"]["frames"] == [0, 40, 80, 110]
 
 
 def test_calibrate_auto_refuses_and_writes_nothing_without_a_court(tmp_path, capsys):
@@ -213,6 +244,6 @@ def test_infer_with_court_points_auto_calibrates_the_video(sample_clip, tmp_path
 
 
 def test_fit_court_reads_a_clip_folder(sample_clip):
-    fit = fit_court(Clip(sample_clip), load_court("padel"), frames=[0, 100, 200])
-    assert fit.frames == [0, 100, 200] and fit.accepted
+    fit = fit_court(Clip(sample_clip), load_court("padel"), frames=[0, 50, 100])
+    assert fit.frames == [0, 50, 100] and fit.accepted
     assert fit.cpu_seconds > 0
