@@ -12,7 +12,7 @@
    runner-up explains clearly less (margin; a rival that lays a painted line on the near wall's top rail is
    the rail's echo, not a rival; a painted line running along that rail in the image — a camera right
    behind the glass, where the rail hides or doubles the near service line — has the fit refined with the
-   rails as lines of their own and then asks for a larger margin), the line pixels on the fitted court's
+   rails as lines of their own and then asks for a larger margin and that paint or a rail be found), the line pixels on the fitted court's
    floor are mostly on its modelled lines (:func:`unexplained_share`) and the camera is plausible. A rejected fit says why; nothing downstream uses it silently.
 
 Example:
@@ -220,7 +220,7 @@ class _Candidate:
     residuals: np.ndarray
     per_line: list[tuple[str, float, float]]  # floor segments: (kind, supported, visible) image length
     net: tuple[float, float]  # the net's top: supported, visible image length
-    confused: np.ndarray | None = None  # (S,) segments left out of the fit as the near rail's (None: none)
+    confused: np.ndarray | None = None  # (S,) painted segments along a near rail (None: not refitted with rails)
 
     @property
     def hits(self) -> float:
