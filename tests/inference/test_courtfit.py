@@ -94,11 +94,11 @@ def test_near_rail_marks_the_painted_line_it_runs_along():
     assert len(tennis.structure) == 0 and not confused_segments(installed, tennis, 1.0).any()
 
 
-@pytest.mark.parametrize("seed, accepted, why", [(519, False, "another placement"), (617, False, "lie on none"),
-                                                 (1001, False, "nothing pins the near court"),
-                                                 (517, True, ""), (507, True, ""), (501, True, ""), (711, True, ""),
-                                                 (613, True, "")])
-def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed, accepted, why):
+@pytest.mark.parametrize("seed, accepted, why, camera_right", [
+    (519, False, "another placement", True), (617, False, "lie on none", False),
+    (1001, False, "nothing pins the near court", False),
+    (517, True, "", True), (507, True, "", True), (501, True, "", True), (711, True, "", True), (613, True, "", True)])
+def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed, accepted, why, camera_right):
     """The bench's installed padel views (drawn size, half with lens distortion): 519 — the rail hides the near
     service line, whose paint pulled the fit onto the rail's lower edge (5 px off); refitted from a fit
     without that paint, the rails are reached and the camera is right, but a rival placement is close:
@@ -117,12 +117,11 @@ def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed
     fit = fit_court_frames(frames, scene.court)
     assert fit.accepted == accepted, fit.summary()
     if fit.accepted:
-        assert _goals_met(fit, scene), fit.summary()
         assert fit.unexplained < 0.45
     else:
         assert why in fit.reason
-    if seed == 519:
-        assert _goals_met(fit, scene), "the refit without the hidden paint should reach the rails"
+    if camera_right:  # 519: the refit without the hidden paint reaches the rails, refused for its rival only
+        assert _goals_met(fit, scene), fit.summary()
 
 
 def test_unexplained_share_is_low_for_the_true_camera_and_high_for_a_shifted_one():
