@@ -151,26 +151,50 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
 
 def init_events(module, path: str | Path, dm: EventDataModule | None = None) -> None:
     """Start from an exported hit-event model file of the same network (class set, features, window):
-    a mismatch with the data's settings is an error naming the config keys to set."""
+    a mismatch with the data's settings is an error naming the config keys to set.
+
+    One mismatch is allowed on purpose: a ball-only file (``features.poses: false``) warm-starts a
+    player-aware network (``data.features.poses=true``) — the ball columns keep their weights and the
+    players block starts at zero (:func:`widen_to_players`), so training begins from the ball-only model's
+    predictions and learns what the players add."""
     blob = load_model_file(path)
+    file_feats = FeatureConfig.from_model_file(blob["features"])
+    widen = dm is not None and dm.features.poses and not file_feats.poses
     if dm is not None:
         wanted = {"data.window": blob.get("window"), "data.last_k": blob.get("last_k"),
                   "data.lookahead": blob.get("lookahead", 0),
                   "data.class_set": blob["class_set"].get("name")}
         have = {"data.window": dm.window, "data.last_k": dm.last_k, "data.lookahead": dm.lookahead,
                 "data.class_set": dm.class_set.name}
-        feats = FeatureConfig.from_model_file(blob["features"]).to_dict()
-        wanted.update({f"data.features.{k}": v for k, v in feats.items()})
-        have.update({f"data.features.{k}": v for k, v in dm.features.to_dict().items()})
+        skip = {"poses", "rel_scale"} if widen else set()  # rel_scale only scales the players block
+        feats = file_feats.to_dict()
+        wanted.update({f"data.features.{k}": v for k, v in feats.items() if k not in skip})
+        have.update({f"data.features.{k}": v for k, v in dm.features.to_dict().items() if k not in skip})
         diff = [f"{k}={wanted[k]}" for k in wanted if k in have and wanted[k] is not None and wanted[k] != have[k]]
         if diff:
             raise ValueError(f"init_weights={path} was trained with other data settings: set {' '.join(diff)}")
+    state = blob["state_dict"]
+    if widen:
+        state = widen_to_players(state, file_feats.n_features, dm.features.n_features)
     try:
-        module.net.load_state_dict(blob["state_dict"])
+        module.net.load_state_dict(state)
     except RuntimeError as e:
         raise ValueError(f"init_weights={path} does not fit this HitNet (model.hidden, model.layers, "
                          f"data.features and data.class_set must match the file's): {str(e)[:300]}") from None
-    log.info("initialised from %s", path)
+    log.info("initialised from %s%s", path, " (ball-only weights; the players block starts at zero)" if widen else "")
+
+
+def widen_to_players(state: dict[str, torch.Tensor], n_ball: int, n_features: int) -> dict[str, torch.Tensor]:
+    """A ball-only HitNet state dict made to read ``n_features`` columns: the first GRU layer's input
+    weights ``(3H, n_ball)`` (each direction) get ``n_features − n_ball`` zero columns appended, the
+    players block's place (:attr:`FeatureConfig.player_offset` = ``n_ball``). Every other tensor is kept."""
+    out = dict(state)
+    for k, w in state.items():
+        if k.startswith("gru.weight_ih_l0"):
+            if w.shape[1] != n_ball:
+                raise ValueError(f"{k} reads {w.shape[1]} features, expected {n_ball} (ball-only model file)")
+            out[k] = torch.cat([w, w.new_zeros(w.shape[0], n_features - n_ball)], dim=1)
+    return out
 
 
 def test_and_export(cfg: DictConfig, det: EventDetector, dm, metrics: dict[str, float], tables) -> dict[str, float]:

@@ -139,3 +139,37 @@ def test_folder_clips_bring_their_players_csv(clip, tmp_path):
     assert dm.labelled("test")[0].sim.players is None and np.all(dm.labelled("test")[0].feats[:, 5:] == 0)
     ball_only = EventDataModule(sport="padel", class_set="padel6", source="folder", root=str(root), window=12)
     assert ball_only.labelled("train")[0].sim.players is None  # not read when the model does not use them
+
+
+def test_a_ball_only_model_file_warm_starts_a_player_aware_network(tmp_path):
+    """init_weights=<ball-only file> with data.features.poses=true: the ball columns keep the file's weights and
+    the players block starts at zero, so the widened network predicts exactly what the file does whatever
+    the players say; any other setting that differs is still an error naming the key."""
+    from pathlib import Path
+
+    from inference.events.detector import load_model_file
+    from inference.events.network import HitNet
+    from training.events.run import init_events
+
+    shipped = Path(__file__).resolve().parents[3] / "inference/weights/hitnet_padel.pth.tar"
+    blob = load_model_file(shipped)
+    dm = EventDataModule(sport="padel", class_set="padel6", window=blob["window"], n_train=2, n_val=2, n_test=2,
+                         seed=5, cache_dir=str(tmp_path), features={**blob["features"], "poses": True})
+    assert dm.features.n_features == 29
+
+    class Module:  # what init_events touches of the Lightning module
+        net = HitNet(29, 6, **{k: v for k, v in blob["net"].items() if k not in ("n_features", "n_classes")})
+
+    init_events(Module, shipped, dm)
+    ball_only = HitNet(**blob["net"])
+    ball_only.load_state_dict(blob["state_dict"])
+    x = torch.randn(7, blob["window"], 29)
+    Module.net.eval(), ball_only.eval()
+    with torch.no_grad():
+        assert torch.allclose(Module.net(x), ball_only(x[:, :, :5]), atol=1e-5)
+        w = Module.net.gru.weight_ih_l0_reverse
+        assert torch.equal(w[:, :5], blob["state_dict"]["gru.weight_ih_l0_reverse"]) and not w[:, 5:].any()
+    other = EventDataModule(sport="padel", class_set="padel6", window=12, n_train=2, n_val=2, n_test=2, seed=5,
+                            cache_dir=str(tmp_path), features={**blob["features"], "poses": True})
+    with pytest.raises(ValueError, match="data.window=24"):
+        init_events(Module, shipped, other)
