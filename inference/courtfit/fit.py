@@ -486,9 +486,11 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     best = _without_rail(best, model, pixels, ev)
     others = [c for c in cands if c is not lead and not c.same_as(lead, model)]
     best_confused = confused_segments(best.camera, model, scale)
-    if not best_confused.any():
+    if not best_confused.any() or (best.confused is not None and _rails_found(best, model, ev) >= MIN_PINNED):
         # a rival that lays a painted line on the near wall's top rail is the rail's echo, not another court;
-        # nor is one the gate would refuse on its own (the net not where it puts it, most floor paint unexplained)
+        # nor is one the gate would refuse on its own (the net not where it puts it, most floor paint unexplained).
+        # A fit refined with the rails counts such rivals only when the rails do not confirm it: rails found
+        # along most of their image length pin the camera's height and tilt independently of the floor paint.
         others = [c for c in others
                   if not confused_segments(c.camera, model, scale).any() and _placeable(c, court, ev)]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
@@ -511,6 +513,14 @@ def _near_pinned(best: _Candidate, model: CourtLines, ev: LineEvidence) -> bool:
     paint = [h / v for (_, h, v), c in zip(best.per_line, best.confused) if c and v > 0]
     rails = [h / v for _, h, v in _support(best.camera, ev, model.structure) if v >= MIN_NET_PX]
     return min(paint, default=1.0) >= MIN_PINNED or max(rails, default=0.0) >= MIN_PINNED
+
+
+def _rails_found(best: _Candidate, model: CourtLines, ev: LineEvidence) -> float:
+    """Share of the near walls' top rails (those at least :data:`MIN_NET_PX` long in the image) found in the
+    line pixels where ``best`` projects them, weighted by image length; 0 when none is that long."""
+    sup = [(h, v) for _, h, v in _support(best.camera, ev, model.structure) if v >= MIN_NET_PX]
+    total = sum(v for _, v in sup)
+    return sum(h for h, _ in sup) / total if total > 0 else 0.0
 
 
 def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, ev: LineEvidence, court: Court,
