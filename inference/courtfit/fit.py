@@ -511,14 +511,20 @@ def _near_pinned(best: _Candidate, model: CourtLines, ev: LineEvidence) -> bool:
     :data:`MIN_NET_PX` long in the image). Otherwise the near court is placed by the side lines' extrapolation
     alone, a few pixels off (dark rails, the paint hidden behind them)."""
     paint = [h / v for (_, h, v), c in zip(best.per_line, best.confused) if c and v > 0]
-    rails = [h / v for _, h, v in _support(best.camera, ev, model.structure) if v >= MIN_NET_PX]
+    rails = [h / v for h, v in _rail_support(best, model, ev)]
     return min(paint, default=1.0) >= MIN_PINNED or max(rails, default=0.0) >= MIN_PINNED
 
 
+def _rail_support(best: _Candidate, model: CourtLines, ev: LineEvidence) -> list[tuple[float, float]]:
+    """(found, visible) image length of each near wall's top rail at least :data:`MIN_NET_PX` long where
+    ``best`` projects it."""
+    return [(h, v) for _, h, v in _support(best.camera, ev, model.structure) if v >= MIN_NET_PX]
+
+
 def _rails_found(best: _Candidate, model: CourtLines, ev: LineEvidence) -> float:
-    """Share of the near walls' top rails (those at least :data:`MIN_NET_PX` long in the image) found in the
-    line pixels where ``best`` projects them, weighted by image length; 0 when none is that long."""
-    sup = [(h, v) for _, h, v in _support(best.camera, ev, model.structure) if v >= MIN_NET_PX]
+    """Share of the rails of :func:`_rail_support` found in the line pixels, weighted by image length; 0 when
+    none is that long."""
+    sup = _rail_support(best, model, ev)
     total = sum(v for _, v in sup)
     return sum(h for h, _ in sup) / total if total > 0 else 0.0
 
