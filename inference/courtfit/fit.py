@@ -10,10 +10,12 @@
 4. the gate: the fit is *accepted* only when enough of the visible court lines are found on line pixels
    (coverage), the pixels sit close to the lines (line RMS), lines of both directions are supported, the
    runner-up explains clearly less (margin; a rival that lays a painted line on the near wall's top rail is
-   the rail's echo, not a rival; a painted line running along that rail in the image — a camera right
-   behind the glass, where the rail hides or doubles the near service line — has the fit refined with the
-   rails as lines of their own and then asks for a larger margin and that paint or a rail be found), the line pixels on the fitted court's
-   floor are mostly on its modelled lines (:func:`unexplained_share`) and the camera is plausible. A rejected fit says why; nothing downstream uses it silently.
+   the rail's echo, not a rival), the line pixels on the fitted court's floor are mostly on its modelled
+   lines (:func:`unexplained_share`) and the camera is plausible. A painted line running along that rail in
+   the image (a camera right behind the glass, where the rail hides or doubles the near service line) has
+   the fit refined with the rails as lines of their own; it then needs a larger margin (rivals the gate
+   would refuse on their own count only when the rails are not found along most of their length) and that
+   paint or a rail found. A rejected fit says why; nothing downstream uses it silently.
 
 Example:
     >>> fit = fit_court(Clip("runs/clip"), load_court("padel"))

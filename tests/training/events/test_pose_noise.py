@@ -164,7 +164,8 @@ def test_a_ball_only_model_file_warm_starts_a_player_aware_network(tmp_path):
     ball_only = HitNet(**blob["net"])
     ball_only.load_state_dict(blob["state_dict"])
     x = torch.randn(7, blob["window"], 29)
-    Module.net.eval(), ball_only.eval()
+    Module.net.eval()
+    ball_only.eval()
     with torch.no_grad():
         assert torch.allclose(Module.net(x), ball_only(x[:, :, :5]), atol=1e-5)
         w = Module.net.gru.weight_ih_l0_reverse
