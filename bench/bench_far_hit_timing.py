@@ -71,8 +71,10 @@ def main(argv=None) -> None:
     ap.add_argument("--weights", default="inference/weights/hitnet_tennis_players.pth.tar")
     ap.add_argument("--clips", type=int, default=60)
     ap.add_argument("--cache", default="runs/events_cache")
+    ap.add_argument("--pose-noise", type=Path, help="pose-noise settings (YAML), e.g. conf/data/pose_noise/movenet_measured.yaml")
     args = ap.parse_args(argv)
     import torch
+    import yaml
 
     from bench_events_players import GAPS
     from inference.court import load_court
@@ -84,7 +86,8 @@ def main(argv=None) -> None:
     logging.getLogger("inference.events.detector").setLevel(logging.ERROR)
     torch.set_num_threads(1)
     clips = simulate_clips("tennis", args.clips, 6161, args.cache, progress=False, fps=50, players=True)
-    noisy = noisy_all(clips, 17, PoseNoiseConfig())
+    cfg = PoseNoiseConfig.from_dict(yaml.safe_load(args.pose_noise.read_text())) if args.pose_noise else PoseNoiseConfig()
+    noisy = noisy_all(clips, 17, cfg)
     tracks = degrade_all(clips, 11, DegradeConfig(**GAPS))
     det = EventDetector.from_checkpoint(args.weights, sport="tennis")
     o = model_outcomes(det, clips, tracks, noisy)

@@ -14,6 +14,7 @@ from inference.clipio import BallTrack, PlayerTracks
 from inference.court import load_court
 from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet
 from inference.events.features import PLAYER_COLUMNS, clip_features, player_features, racket_hand
+from inference.events.metrics import EventCounts
 from training.events.simulate import simulate_clip
 
 COL = {n: i for i, n in enumerate(PLAYER_COLUMNS)}
@@ -179,3 +180,21 @@ def test_the_shipped_player_aware_tennis_model_reads_players(tennis):
     c = tennis
     r = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)
     assert len(r.events) > 5 and np.allclose(r.probs.sum(axis=1), 1.0, atol=1e-4)
+
+
+def test_the_shipped_player_aware_padel_model_reads_players_and_runs_without():
+    from inference.events.detector import choose_weights
+
+    c = simulate_clip("padel", 515, players=True)
+    path = choose_weights(None, "padel", c.players)
+    assert path.name == "hitnet_padel_players.pth.tar"
+    det = EventDetector.from_checkpoint(path, sport="padel")
+    assert det.wants_players and det.class_set.name == "padel6"
+    r = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)
+    scored = EventCounts(det.class_set.classes)
+    cs = det.class_set
+    scored.add(c.events.frame, [cs.encode_label(str(e)) or 0 for e in c.events.event], r.events.frame,
+               [cs.index(x) for x in r.coarse], 2)
+    assert scored.scores()["f1"] > 0.6, scored.scores()          # an exact rally: most events found
+    alone = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames)   # no players: still runs
+    assert len(alone.events) > 0 and choose_weights(None, "padel", None).name == "hitnet_padel.pth.tar"

@@ -174,3 +174,70 @@ def test_a_ball_only_model_file_warm_starts_a_player_aware_network(tmp_path):
                             cache_dir=str(tmp_path), features={**blob["features"], "poses": True})
     with pytest.raises(ValueError, match="data.window=24"):
         init_events(Module, shipped, other)
+
+
+def _height_px(clip) -> np.ndarray:
+    y = clip.players.keypoints[:, :, 1] * clip.height
+    return np.nanmax(y, axis=1) - np.nanmin(y, axis=1)
+
+
+def test_slow_offsets_scale_with_the_player_and_drift(clip):
+    pl = clip.players
+    off = noisy_players(clip, np.random.default_rng(2), quiet(bias_rel=(0.05, 0.05), bias_s=0.5))
+    err = (off.keypoints[..., :2] - pl.keypoints[..., :2]) * [clip.width, clip.height]
+    rel = err / _height_px(clip)[:, None, None]
+    assert 0.035 < np.nanstd(rel[:, :9]) < 0.065                       # head, shoulders, elbows
+    assert 1.5 < np.nanstd(rel[:, [9, 10]]) / np.nanstd(rel[:, :9]) < 2.5  # wrists twice as far off
+    pid = pl.player_id == 0
+    e = err[pid][:, 5, 0]
+    step = np.nanstd(np.diff(e)) / np.sqrt(2)
+    assert step < 0.3 * np.nanstd(e)                                   # drifts, not white noise
+
+
+def test_wrists_on_something_else_in_runs_only_on_the_chosen_side(clip):
+    pl = clip.players
+    out = noisy_players(clip, np.random.default_rng(3), quiet(wrist_outlier_near=0.3, wrist_outlier_rel=(0.3, 0.5)))
+    err = np.linalg.norm((out.keypoints[..., :2] - pl.keypoints[..., :2]) * [clip.width, clip.height], axis=2)
+    rel = err / _height_px(clip)[:, None]
+    near, far = pl.team == "near", pl.team == "far"
+    wrong = rel[near][:, [9, 10]] > 0.29
+    assert 0.2 < wrong.mean() < 0.4 and (rel[near][:, [9, 10]][wrong] < 0.51).all()
+    assert np.allclose(err[far], 0) and np.allclose(err[:, :9], 0)   # the far side and the body untouched
+
+
+def test_dropped_detections_are_bridged_like_the_players_stage(clip):
+    pl = clip.players
+    cfg = quiet(drop_near=(0.2, 0.2), drop_run_s=(0.04, 0.1), fill_gap_s=0.6)
+    out = noisy_players(clip, np.random.default_rng(4), cfg)
+    near_rows = (out.team == "near").sum()
+    assert near_rows >= 0.97 * (pl.team == "near").sum()                # short gaps filled ...
+    half = out.score < 0.75 * np.nanmax(pl.score)
+    assert 0.1 < half[out.team == "near"].mean() < 0.3                  # ... at half the score
+    gaps = noisy_players(clip, np.random.default_rng(4), quiet(drop_near=(0.2, 0.2), drop_run_s=(0.04, 0.1)))
+    assert (gaps.team == "near").sum() < 0.85 * (pl.team == "near").sum()  # without filling they stay gaps
+    # a filled row lies on the line between the kept rows around it
+    i = int(np.flatnonzero(half & (out.team == "near"))[0])
+    pid, f = out.player_id[i], out.frame[i]
+    rows = np.flatnonzero((out.player_id == pid) & ~half)
+    before, after = rows[out.frame[rows] < f][-1], rows[out.frame[rows] > f][0]
+    w = (f - out.frame[before]) / (out.frame[after] - out.frame[before])
+    expect = (1 - w) * out.keypoints[before, 0, :2] + w * out.keypoints[after, 0, :2]
+    assert np.allclose(out.keypoints[i, 0, :2], expect)
+
+
+def test_far_players_can_flip_at_their_own_rate(clip):
+    pl = clip.players
+    out = noisy_players(clip, np.random.default_rng(5), quiet(p_flip_lr=3.0, p_flip_lr_far=0.0))
+    moved = ~np.isclose(out.keypoints[:, 9, 0], pl.keypoints[:, 9, 0])
+    assert moved[pl.team == "near"].any() and not moved[pl.team == "far"].any()
+
+
+def test_measured_settings_file_loads():
+    import yaml
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "conf/data/pose_noise/movenet_measured.yaml"
+    cfg = PoseNoiseConfig.from_dict(yaml.safe_load(path.read_text()))
+    assert cfg.fill_gap_s > 0 and cfg.bias_rel[1] > 0 and cfg.wrist_outlier_near > 0
+    with pytest.raises(ValueError, match="bias_s"):
+        PoseNoiseConfig(bias_s=0)
