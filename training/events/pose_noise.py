@@ -150,6 +150,23 @@ def _heights_px(kp: np.ndarray, size: np.ndarray) -> np.ndarray:
     return h
 
 
+def _outlier_shift(n_frames: int, f: np.ndarray, height: np.ndarray, frac: float, run: tuple[int, int],
+                   rel: tuple[float, float], rng: np.random.Generator) -> np.ndarray:
+    """``(len(f), 2)`` pixel shifts of one joint placed on something else: runs (``run`` frames) covering
+    about ``frac`` of the clip's ``n_frames``, each moved ``rel`` × the player's ``height`` (px, per row) in
+    one direction; zero outside the runs. ``f``: the rows' frames."""
+    wrong = _runs(n_frames, frac, run, rng)
+    starts = np.flatnonzero(np.diff(np.r_[0, wrong.astype(np.int8)]) == 1)
+    run_id = np.cumsum(np.isin(np.arange(n_frames), starts)) - 1
+    ang = rng.uniform(0.0, 2 * np.pi, max(len(starts), 1))
+    mag = rng.uniform(*rel, max(len(starts), 1))
+    shift = np.zeros((len(f), 2))
+    sel = wrong[f]
+    r = run_id[f][sel]
+    shift[sel] = np.stack([np.cos(ang[r]), np.sin(ang[r])], axis=1) * (mag[r] * height[sel])[:, None]
+    return shift
+
+
 def _fill_gaps(p: PlayerTracks, fps: float, max_gap_s: float) -> PlayerTracks:
     """Each player's gaps up to ``max_gap_s`` filled by linear interpolation, as the players stage does
     (:func:`inference.players.tracking.interpolate`: every per-frame array, interpolated rows at half score)."""
@@ -233,15 +250,7 @@ def noisy_players(sim, rng: np.random.Generator, cfg: PoseNoiseConfig = PoseNois
         if p_out > 0:
             out_run = (frames(cfg.wrist_outlier_s[0]), frames(cfg.wrist_outlier_s[1]))
             for j in _WRISTS:
-                wrong = _runs(n_frames, p_out, out_run, rng)
-                starts = np.flatnonzero(np.diff(np.r_[0, wrong.astype(np.int8)]) == 1)
-                run_id = np.cumsum(np.isin(np.arange(n_frames), starts)) - 1   # one direction per run
-                ang = rng.uniform(0.0, 2 * np.pi, max(len(starts), 1))
-                mag = rng.uniform(*cfg.wrist_outlier_rel, max(len(starts), 1))
-                sel = wrong[f]
-                r = run_id[f][sel]
-                shift = np.stack([np.cos(ang[r]), np.sin(ang[r])], axis=1) * (mag[r] * height[sel])[:, None]
-                k[sel, j, :2] += shift / size
+                k[:, j, :2] += _outlier_shift(n_frames, f, height, p_out, out_run, cfg.wrist_outlier_rel, rng) / size
         lost = rng.random((len(rows), 17)) < cfg.p_joint_miss
         lost[:, _WRISTS] |= rng.random((len(rows), 2)) < cfg.p_wrist_miss
         k[lost] = np.nan

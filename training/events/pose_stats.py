@@ -16,7 +16,7 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -84,43 +84,111 @@ def _visible(gt_kp: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Side:
-    miss_frac: list            # per (clip, player)
-    miss_runs_s: list
-    body_err: list             # (k, 2) px per axis, body joints
-    wrist_err: list            # (k, 2) px per axis, wrists
-    body_dist_rel: list        # error / player height, body
-    wrist_dist_rel: list
+    """What is gathered for one side (near or far) over every clip and true player."""
+
+    miss_frac: list = field(default_factory=list)        # per (clip, player)
+    miss_runs_s: list = field(default_factory=list)
+    seconds: float = 0.0
+    matched: int = 0
+    team_wrong: int = 0
+    height_px: list = field(default_factory=list)
+    court_err: list = field(default_factory=list)        # (2,) m per matched row
+    body_err: list = field(default_factory=list)         # (2,) px per body joint
+    wrist_err: list = field(default_factory=list)        # (2,) px per wrist
+    body_dist_rel: list = field(default_factory=list)    # body-joint error / player height
+    wrist_off_rel: list = field(default_factory=list)    # distance to the nearer true wrist / player height
+    body_step: list = field(default_factory=list)        # frame-to-frame change of the error / √2, px
+    wrist_step: list = field(default_factory=list)
+    lag_pairs: list = field(default_factory=list)        # (error at f, error at f + lag) of body joints
+    jitter_per_clip: list = field(default_factory=list)  # body-joint offset σ per clip, px
     wrist_rows: int = 0
     wrist_missing: int = 0
     joint_rows: int = 0
     joint_missing: int = 0
-    flip_runs_s: list = None   # type: ignore[assignment]
-    flip_frames: int = 0
     flip_checked: int = 0
-    team_wrong: int = 0
-    matched: int = 0
-    seconds: float = 0.0
-    court_err: list = None     # type: ignore[assignment]
-    height_px: list = None     # type: ignore[assignment]
-    jitter_per_clip: list = None  # type: ignore[assignment]
-    body_step: list = None     # type: ignore[assignment]
-    wrist_step: list = None    # type: ignore[assignment]
-    outlier_runs_s: list = None  # type: ignore[assignment]
-    wrist_off_rel: list = None  # type: ignore[assignment]
-    bridged: list = None       # per (clip, player): fraction of its rows the players stage filled
-    bridged_runs_s: list = None
-    lag_pairs: list = None     # (error at f, error at f + lag) of body joints, px
+    flip_frames: int = 0
+    flip_runs_s: list = field(default_factory=list)
+    outlier_runs_s: list = field(default_factory=list)
+    bridged: list = field(default_factory=list)          # per (clip, player): share of rows the stage filled
+    bridged_runs_s: list = field(default_factory=list)
 
-    def __post_init__(self) -> None:
-        for name in ("flip_runs_s", "court_err", "height_px", "jitter_per_clip", "body_step", "wrist_step",
-                     "outlier_runs_s", "wrist_off_rel", "bridged", "bridged_runs_s", "lag_pairs"):
-            if getattr(self, name) is None:
-                setattr(self, name, [])
+
+@dataclass
+class _RowError:
+    """One matched row against the truth (pixels of the frame): ``err`` (17, 2); masks (17,) of joints the
+    truth shows (``vis``), the prediction has (``have``), body joints and wrists both have (``body``,
+    ``wrist``); the player's ``height`` px; ``off`` (2,) each wrist's distance to the nearer true wrist;
+    ``flipped``: left and right swapped (None: too few pairs to tell)."""
+
+    err: np.ndarray
+    vis: np.ndarray
+    have: np.ndarray
+    body: np.ndarray
+    wrist: np.ndarray
+    height: float
+    off: np.ndarray
+    flipped: bool | None
+
+
+def _row_error(g: np.ndarray, p: np.ndarray, wh: np.ndarray, min_score: float) -> _RowError:
+    """``g``, ``p``: (17, 3) true and predicted keypoints (normalised x, y, score)."""
+    vis = _visible(g[None])[0]
+    ys = g[vis, 1] * wh[1]
+    height = float(ys.max() - ys.min()) if vis.sum() >= 2 else np.nan
+    have = np.isfinite(p[:, :2]).all(axis=1) & (np.nan_to_num(p[:, 2], nan=1.0) >= min_score)
+    err = (p[:, :2] - g[:, :2]) * wh
+    use = have & vis
+    wrists = np.zeros(17, bool)
+    wrists[list(_WRISTS)] = True
+    off = np.minimum(np.linalg.norm(err[list(_WRISTS)], axis=1),
+                     np.linalg.norm((p[list(_WRISTS), :2] - g[list(_WRISTS[::-1]), :2]) * wh, axis=1))
+    pairs = [(a, b) for a, b in _PAIRS if use[a] and use[b]]
+    flipped = None
+    if len(pairs) >= 2:
+        direct = sum(np.linalg.norm(err[a]) + np.linalg.norm(err[b]) for a, b in pairs)
+        swapped = sum(np.linalg.norm((p[b, :2] - g[a, :2]) * wh) + np.linalg.norm((p[a, :2] - g[b, :2]) * wh)
+                      for a, b in pairs)
+        flipped = bool(swapped < 0.5 * direct)
+    return _RowError(err, vis, have, use & ~wrists, use & wrists, height, off, flipped)
+
+
+def _add_row(st: _Side, r: _RowError, prev: _RowError | None, outlier_frac: float) -> np.ndarray:
+    """Gather one matched row (``prev``: the same player's row on the frame before, if matched); returns
+    the (2,) mask of its wrists placed on something else."""
+    st.height_px.append(r.height)
+    st.body_err += list(r.err[r.body])
+    st.body_dist_rel += list(np.linalg.norm(r.err[r.body], axis=1) / r.height)
+    st.wrist_err += list(r.err[r.wrist])
+    w = r.wrist[list(_WRISTS)]
+    st.wrist_off_rel += list(r.off[w] / r.height)
+    if prev is not None:
+        both = np.isfinite(prev.err).all(axis=1) & (prev.body | prev.wrist)
+        step = (r.err - prev.err) / np.sqrt(2.0)
+        st.body_step += list(step[both & r.body])
+        st.wrist_step += list(step[both & r.wrist])
+    others = np.ones(17, bool)
+    others[list(_WRISTS)] = False
+    st.wrist_rows += int(r.vis[list(_WRISTS)].sum())
+    st.wrist_missing += int((r.vis & ~r.have)[list(_WRISTS)].sum())
+    st.joint_rows += int(r.vis[others].sum())
+    st.joint_missing += int((r.vis & ~r.have)[others].sum())
+    st.flip_checked += int(r.flipped is not None)
+    return w & (r.off / r.height > outlier_frac)
+
+
+def _add_bridged(sides: dict[str, _Side], c: PoseClipTruth) -> None:
+    bridged = bridged_rows(c)
+    for pid in c.pred.ids():
+        rows = np.flatnonzero(c.pred.player_id == pid)
+        side = str(c.pred.team[rows[0]])
+        if side in SIDES:
+            sides[side].bridged.append(float(bridged[rows].mean()))
+            sides[side].bridged_runs_s += [n / c.fps for n in _runs(bridged[rows])]
 
 
 def _lag_corr(pairs: list) -> float:
-    """Correlation of the body-joint errors at ``f`` and ``f + lag`` (each joint's mean per player removed
-    is not done: the offset itself is what drifts), pooled over joints and axes."""
+    """Correlation of the body-joint errors at ``f`` and ``f + lag``, pooled over joints and axes (the
+    offset itself is what drifts, so no per-player mean is removed)."""
     if not pairs:
         return float("nan")
     a = np.stack(pairs)                   # (k, 2, 17, 2)
@@ -131,6 +199,45 @@ def _lag_corr(pairs: list) -> float:
     return float(np.corrcoef(x[ok], y[ok])[0, 1])
 
 
+def _measure_player(st: _Side, c: PoseClipTruth, gid: int, side: str, matches: dict, index: dict,
+                    min_score: float, outlier_frac: float, lag: int) -> list:
+    """Gather one true player of clip ``c``; returns its body-joint errors (for the clip's offset σ)."""
+    gt, pred = c.gt, c.pred
+    wh = np.array([c.width, c.height], float)
+    rows = np.flatnonzero(gt.player_id == gid)
+    frames = gt.frame[rows][_visible(gt.keypoints[rows]).sum(axis=1) >= 5]
+    if not len(frames):
+        return []
+    found = np.array([any(g == gid for g, _ in matches.get(int(f), [])) for f in frames])
+    st.miss_frac.append(float(1.0 - found.mean()))
+    st.miss_runs_s += [n / c.fps for n in _runs(~found)]
+    st.seconds += len(frames) / c.fps
+    flipped = np.zeros(len(frames), bool)
+    outlier = np.zeros((len(frames), 2), bool)
+    body_by_frame: dict[int, np.ndarray] = {}
+    errors: list = []
+    prev, prev_f = None, None
+    for k, f in enumerate(frames):
+        pid = next((p for g, p in matches.get(int(f), []) if g == gid), None)
+        if pid is None:
+            continue
+        gi, pi = index["gt"][(int(f), int(gid))], index["pred"][(int(f), int(pid))]
+        st.matched += 1
+        st.team_wrong += int(str(pred.team[pi]) != side)
+        st.court_err.append(pred.court_xy[pi] - gt.court_xy[gi])
+        r = _row_error(gt.keypoints[gi], pred.keypoints[pi], wh, min_score)
+        outlier[k] = _add_row(st, r, prev if prev_f == f - 1 else None, outlier_frac)
+        flipped[k] = bool(r.flipped)
+        errors += list(r.err[r.body])
+        body_by_frame[int(f)] = np.where(r.body[:, None], r.err, np.nan)
+        prev, prev_f = r, f
+    st.flip_frames += int(flipped.sum())
+    st.flip_runs_s += [n / c.fps for n in _runs(flipped)]
+    st.outlier_runs_s += [n / c.fps for j in range(2) for n in _runs(outlier[:, j])]
+    st.lag_pairs += [np.stack([e, body_by_frame[f + lag]]) for f, e in body_by_frame.items() if f + lag in body_by_frame]
+    return errors
+
+
 def measure_players(clips: list[PoseClipTruth], min_score: float = 0.1, outlier_frac: float = 0.25,
                     lag_s: float = 0.2) -> dict:
     """Statistics of the predicted players of ``clips`` against the truth (see the module docstring); with
@@ -138,100 +245,28 @@ def measure_players(clips: list[PoseClipTruth], min_score: float = 0.1, outlier_
     body-joint error's correlation over ``lag_s`` (how slowly the offset drifts).
 
     Returns a plain dict (YAML-ready): per side ``near``/``far`` the figures, and ``clips``."""
-    sides = {s: _Side([], [], [], [], [], []) for s in SIDES}
+    sides = {s: _Side() for s in SIDES}
     for c in clips:
         if c.raw is not None:
-            bridged = bridged_rows(c)
-            for pid in c.pred.ids():
-                rows = np.flatnonzero(c.pred.player_id == pid)
-                side = str(c.pred.team[rows[0]])
-                if side in SIDES:
-                    sides[side].bridged.append(float(bridged[rows].mean()))
-                    sides[side].bridged_runs_s += [n / c.fps for n in _runs(bridged[rows])]
-        lag = max(1, int(round(lag_s * c.fps)))
-        wh = np.array([c.width, c.height], float)
-        gt, pred = c.gt, c.pred
-        matches = match_frames(pred, gt)
-        pred_row = {(int(f), int(p)): i for i, (f, p) in enumerate(zip(pred.frame, pred.player_id))}
-        gt_row = {(int(f), int(g)): i for i, (f, g) in enumerate(zip(gt.frame, gt.player_id))}
-        clip_err = {s: [] for s in SIDES}
-        for gid in gt.ids():
-            rows = np.flatnonzero(gt.player_id == gid)
-            side = str(gt.team[rows[0]]) if str(gt.team[rows[0]]) in SIDES else "near"
-            st = sides[side]
-            frames = gt.frame[rows]
-            inside = _visible(gt.keypoints[rows]).sum(axis=1) >= 5
-            frames = frames[inside]
-            if not len(frames):
-                continue
-            found = np.array([any(g == gid for g, _ in matches.get(int(f), [])) for f in frames])
-            st.miss_frac.append(float(1.0 - found.mean()))
-            st.miss_runs_s += [n / c.fps for n in _runs(~found)]
-            st.seconds += len(frames) / c.fps
-            flipped = np.zeros(len(frames), bool)
-            prev_err, prev_f = None, None
-            body_by_frame: dict[int, np.ndarray] = {}
-            outlier = np.zeros((len(frames), 2), bool)
-            for k, f in enumerate(frames):
-                pid = next((p for g, p in matches.get(int(f), []) if g == gid), None)
-                if pid is None:
-                    continue
-                gi, pi = gt_row[(int(f), int(gid))], pred_row[(int(f), int(pid))]
-                st.matched += 1
-                st.team_wrong += int(str(pred.team[pi]) != side)
-                st.court_err.append(pred.court_xy[pi] - gt.court_xy[gi])
-                g = gt.keypoints[gi]
-                p = pred.keypoints[pi]
-                vis = _visible(g[None])[0]
-                ys = g[vis, 1] * wh[1]
-                height = float(ys.max() - ys.min()) if vis.sum() >= 2 else np.nan
-                st.height_px.append(height)
-                score = np.nan_to_num(p[:, 2], nan=1.0)
-                have = np.isfinite(p[:, :2]).all(axis=1) & (score >= min_score)
-                err = (p[:, :2] - g[:, :2]) * wh
-                use = have & vis
-                body = use.copy()
-                body[list(_WRISTS)] = False
-                st.body_err += list(err[body])
-                st.body_dist_rel += list(np.linalg.norm(err[body], axis=1) / height)
-                w = use.copy()
-                w[[j for j in range(17) if j not in _WRISTS]] = False
-                st.wrist_err += list(err[w])
-                st.wrist_dist_rel += list(np.linalg.norm(err[w], axis=1) / height)
-                # a wrist on neither true wrist (a left/right swap is counted as a flip, not here)
-                off = np.minimum(np.linalg.norm(err[list(_WRISTS)], axis=1),
-                                 np.linalg.norm((p[list(_WRISTS), :2] - g[list(_WRISTS[::-1]), :2]) * wh, axis=1))
-                outlier[k] = w[list(_WRISTS)] & (off / height > outlier_frac)
-                st.wrist_off_rel += list(off[w[list(_WRISTS)]] / height)
-                clip_err[side] += list(err[body])
-                if prev_err is not None and prev_f == f - 1:      # frame-to-frame change of the error
-                    both = use & np.isfinite(prev_err).all(axis=1)
-                    step = (err - prev_err) / np.sqrt(2.0)
-                    st.body_step += list(step[both & body])
-                    st.wrist_step += list(step[both & w])
-                prev_err, prev_f = np.where(use[:, None], err, np.nan), f
-                body_by_frame[int(f)] = np.where(body[:, None], err, np.nan)
-                st.wrist_rows += int(vis[list(_WRISTS)].sum())
-                st.wrist_missing += int((vis & ~have)[list(_WRISTS)].sum())
-                others = [j for j in range(17) if j not in _WRISTS]
-                st.joint_rows += int(vis[others].sum())
-                st.joint_missing += int((vis & ~have)[others].sum())
-                pairs = [(a, b) for a, b in _PAIRS if use[a] and use[b]]
-                if len(pairs) >= 2:
-                    st.flip_checked += 1
-                    direct = sum(np.linalg.norm(err[a]) + np.linalg.norm(err[b]) for a, b in pairs)
-                    swapped = sum(np.linalg.norm((p[b, :2] - g[a, :2]) * wh) + np.linalg.norm((p[a, :2] - g[b, :2]) * wh)
-                                  for a, b in pairs)
-                    flipped[k] = swapped < 0.5 * direct
-            st.flip_frames += int(flipped.sum())
-            st.flip_runs_s += [n / c.fps for n in _runs(flipped)]
-            st.outlier_runs_s += [n / c.fps for j in range(2) for n in _runs(outlier[:, j])]
-            st.lag_pairs += [np.stack([e, body_by_frame[f + lag]]) for f, e in body_by_frame.items()
-                             if f + lag in body_by_frame]
+            _add_bridged(sides, c)
+        matches = match_frames(c.pred, c.gt)
+        index = {"pred": {(int(f), int(p)): i for i, (f, p) in enumerate(zip(c.pred.frame, c.pred.player_id))},
+                 "gt": {(int(f), int(g)): i for i, (f, g) in enumerate(zip(c.gt.frame, c.gt.player_id))}}
+        clip_err: dict[str, list] = {s: [] for s in SIDES}
+        for gid in c.gt.ids():
+            team = str(c.gt.team[np.flatnonzero(c.gt.player_id == gid)[0]])
+            side = team if team in SIDES else "near"
+            clip_err[side] += _measure_player(sides[side], c, gid, side, matches, index, min_score, outlier_frac,
+                                              max(1, int(round(lag_s * c.fps))))
         for s in SIDES:
             if len(clip_err[s]) >= 20:
                 sides[s].jitter_per_clip.append(_robust_sigma(np.asarray(clip_err[s])))
-    out: dict = {"clips": [c.name for c in clips], "lag_s": lag_s, "outlier_frac": outlier_frac}
+    return _summary(sides, [c.name for c in clips], lag_s, outlier_frac)
+
+
+def _summary(sides: dict[str, _Side], names: list[str], lag_s: float, outlier_frac: float) -> dict:
+    """The YAML-ready figures of :func:`measure_players`."""
+    out: dict = {"clips": names, "lag_s": lag_s, "outlier_frac": outlier_frac}
     for s, st in sides.items():
         q = lambda v: [round(float(x), 3) for x in np.quantile(v, (0.1, 0.5, 0.9))] if len(v) else []  # noqa: E731
         body = np.asarray(st.body_err).reshape(-1, 2)
