@@ -35,7 +35,7 @@ CONDITIONS = {
 }
 
 
-def rendered(dirs: list[Path]):
+def rendered(dirs: list[Path], backend: str = "movenet"):
     """Rendered clips as simulated ones (true ball, events, camera) and the players MoveNet finds in them."""
     from bench_pose_stats import poses
 
@@ -50,7 +50,7 @@ def rendered(dirs: list[Path]):
         cam = c.read_camera(gt=True)
         clips.append(SimClip(f"{d.parent.name}/{d.name}", float(c.info.fps), int(c.info.width), int(c.info.height),
                              c.n_frames, c.read_ball(), c.read_events(gt=True), cam))
-        seq = poses(d, Path("runs/pose_stats/cache"), "movenet")
+        seq = poses(d, Path("runs/pose_stats/cache"), backend)
         players.append(players_from_poses(seq, cam, load_court(c.court_path()), c.info.fps))
     return clips, players
 
@@ -68,13 +68,14 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path, help="also write the tables here")
     ap.add_argument("--pose-noise", type=Path, help="pose-noise settings (YAML) for the held-out players")
     ap.add_argument("--rendered", nargs="+", type=Path, help="rendered clip folders instead (MoveNet's players)")
+    ap.add_argument("--backend", default="movenet", help="with --rendered: the pose backend (movenet@960: larger input)")
     args = ap.parse_args(argv)
     logging.getLogger("inference.events.detector").setLevel(logging.ERROR)  # "model without players" rows
     torch.set_num_threads(1)
     t0 = time.process_time()
     if args.rendered:
-        clips, players = rendered(args.rendered)
-        source = f"{len(clips)} rendered clips, players from MoveNet and the players stage"
+        clips, players = rendered(args.rendered, args.backend)
+        source = f"{len(clips)} rendered clips, players from {args.backend} and the players stage"
     else:
         clips = simulate_clips(args.sport, args.clips, 6161, args.cache, progress=False, fps=args.fps, players=True)
         cfg = PoseNoiseConfig()

@@ -49,7 +49,11 @@ def poses(clip_dir: Path, cache: Path, backend_name: str):
         cut = np.cumsum(z["count"])[:-1]
         parts = [np.split(z[k], cut) for k in ("boxes", "keypoints", "kp_scores", "scores")]
         return PoseSequence([Persons(*p) for p in zip(*parts)], backend_name)
-    seq = make_backend(backend_name).run(Clip(clip_dir), progress=False)
+    name, _, size = backend_name.partition("@")              # e.g. movenet@960: MoveNet at another input size
+    backend = make_backend(name)
+    if size:
+        backend.input_size = int(size)
+    seq = backend.run(Clip(clip_dir), progress=False)
     cache.mkdir(parents=True, exist_ok=True)
     cat = lambda k, shape: np.concatenate([getattr(p, k).reshape((-1,) + shape) for p in seq.frames])  # noqa: E731
     np.savez_compressed(path, count=np.array([len(p.scores) for p in seq.frames]), boxes=cat("boxes", (4,)),
@@ -82,7 +86,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("clips", nargs="+", type=Path, help="rendered clip folders with gt/players.csv")
     ap.add_argument("--out", default="conf/data/pose_noise/movenet_measured.yaml")
-    ap.add_argument("--backend", default="movenet")
+    ap.add_argument("--backend", default="movenet", help="pose backend; movenet@960: MoveNet at a 960-px input")
     ap.add_argument("--cache", type=Path, default=Path("runs/pose_stats/cache"))
     ap.add_argument("--steps", type=int, default=3, help="correction steps of the settings (refine_settings)")
     args = ap.parse_args(argv)
