@@ -43,13 +43,19 @@ def poses(clip_dir: Path, cache: Path, backend_name: str):
     from inference.players.backends import make_backend
     from inference.players.types import Persons, PoseSequence
 
+    name, _, size = backend_name.partition("@")              # e.g. movenet@960: MoveNet at another input size
+    if name == "movenet":                                      # the cache names the input size used
+        from inference.players.backends import movenet_input_size
+
+        info = Clip(clip_dir).info
+        size = str(movenet_input_size(info.height, info.width, int(size) if size else None))
+        backend_name = f"movenet@{size}"
     path = cache / f"{clip_dir.parent.name}_{clip_dir.name}_{backend_name}.npz"
     if path.is_file():
         z = np.load(path)
         cut = np.cumsum(z["count"])[:-1]
         parts = [np.split(z[k], cut) for k in ("boxes", "keypoints", "kp_scores", "scores")]
         return PoseSequence([Persons(*p) for p in zip(*parts)], backend_name)
-    name, _, size = backend_name.partition("@")              # e.g. movenet@960: MoveNet at another input size
     backend = make_backend(name)
     if size:
         backend.input_size = int(size)
@@ -86,7 +92,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("clips", nargs="+", type=Path, help="rendered clip folders with gt/players.csv")
     ap.add_argument("--out", default="conf/data/pose_noise/movenet_measured.yaml")
-    ap.add_argument("--backend", default="movenet", help="pose backend; movenet@960: MoveNet at a 960-px input")
+    ap.add_argument("--backend", default="movenet",
+                    help="pose backend; movenet@640: MoveNet at a 640-px input (default: its size for the frame)")
     ap.add_argument("--cache", type=Path, default=Path("runs/pose_stats/cache"))
     ap.add_argument("--steps", type=int, default=3, help="correction steps of the settings (refine_settings)")
     args = ap.parse_args(argv)

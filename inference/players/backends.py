@@ -134,7 +134,7 @@ class MoveNetBackend(_FrameBackend):
     """MoveNet MultiPose Lightning (≤ 6 people, COCO-17) from a user-provided .tflite file."""
 
     model: Path | None = None
-    input_size: int = 640   # the long side, a multiple of 32 (far-court players need 512–640)
+    input_size: int | None = None   # the long side, a multiple of 32; None: movenet_input_size's choice
     name: str = "movenet"
 
     def __post_init__(self) -> None:
@@ -157,7 +157,7 @@ class MoveNetBackend(_FrameBackend):
         from ai_edge_litert.interpreter import Interpreter
 
         h, w = image.shape[:2]
-        scale = self.input_size / max(h, w)
+        scale = movenet_input_size(h, w, self.input_size) / max(h, w)
         ih, iw = (int(np.ceil(h * scale / 32) * 32), int(np.ceil(w * scale / 32) * 32))
         if not hasattr(self, "_interp") or self._shape != (ih, iw):
             self._interp = Interpreter(model_path=str(self.model))
@@ -173,6 +173,15 @@ class MoveNetBackend(_FrameBackend):
         it.invoke()
         raw = it.get_tensor(it.get_output_details()[0]["index"])[0]
         return decode_movenet(raw, (ih, iw), scale)
+
+
+def movenet_input_size(h: int, w: int, requested: int | None = None) -> int:
+    """MoveNet's input long side for an ``h`` × ``w`` frame: ``requested`` when given, else 960 for frames of
+    1600 px or more (1080p: far-court players ~80 px tall stay ~40 px in the input; on rendered 1080p clips
+    this cut far-player misses and wrist errors, docs/players.md) and 640 below (720p and smaller)."""
+    if requested:
+        return int(requested)
+    return 960 if max(h, w) >= 1600 else 640
 
 
 def decode_movenet(raw: np.ndarray, canvas_hw: tuple[int, int], scale: float, min_score: float = 0.1) -> Persons:

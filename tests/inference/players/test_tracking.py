@@ -170,3 +170,28 @@ def test_movenet_backend_on_rendered_players():
         for g in gt.keypoints[gt.frame == f, :, :2] * [clip.info.width, clip.info.height]:
             errors.append(np.nanmean(np.linalg.norm(persons.keypoints - g[None], axis=2), axis=1).min())
     assert np.median(errors) < 15.0
+
+
+def test_movenet_input_size_grows_with_the_frame():
+    """1080p frames run MoveNet at a 960-px input (far players stay large enough), smaller frames at 640."""
+    import cv2
+
+    from inference.players.backends import MoveNetBackend, movenet_input_size
+
+    assert movenet_input_size(1080, 1920) == 960 and movenet_input_size(720, 1280) == 640
+    assert movenet_input_size(1080, 1920, 640) == 640
+    backend = MoveNetBackend()
+    ok, reason = backend.available()
+    if not ok:
+        pytest.skip(reason)
+    clip = Clip(SAMPLE / "tennis_sample")
+    frame = clip.frames()[40]
+    gt = clip.read_players(gt=True)
+    big = cv2.resize(frame, (1920, 1080))
+    persons = backend.infer(big)
+    assert backend._shape == (544, 960)                       # 1080 × 960 / 1920 = 540 → 544
+    sx, sy = 1920 / clip.info.width, 1080 / clip.info.height
+    for g in gt.keypoints[gt.frame == 40, :, :2] * [clip.info.width * sx, clip.info.height * sy]:
+        assert np.nanmean(np.linalg.norm(persons.keypoints - g[None], axis=2), axis=1).min() < 25.0
+    backend.infer(frame)
+    assert max(backend._shape) == 640
