@@ -236,8 +236,9 @@ def test_measured_settings_file_loads():
     import yaml
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[3] / "conf/data/pose_noise/movenet_measured.yaml"
-    cfg = PoseNoiseConfig.from_dict(yaml.safe_load(path.read_text()))
-    assert cfg.fill_gap_s > 0 and cfg.bias_rel[1] > 0 and cfg.wrist_outlier_near > 0
+    for name in ("movenet_measured", "movenet960_measured"):
+        path = Path(__file__).resolve().parents[3] / f"conf/data/pose_noise/{name}.yaml"
+        cfg = PoseNoiseConfig.from_dict(yaml.safe_load(path.read_text()))
+        assert cfg.fill_gap_s > 0 and cfg.bias_rel[1] > 0 and cfg.wrist_outlier_near > 0
     with pytest.raises(ValueError, match="bias_s"):
         PoseNoiseConfig(bias_s=0)
