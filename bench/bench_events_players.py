@@ -59,7 +59,6 @@ def main(argv=None) -> None:
     import logging
 
     from inference.events import EventDetector
-    from inference.events.metrics import tolerance_frames
     from training.events.degrade import DegradeConfig, degrade_all
     from training.events.pose_noise import PoseNoiseConfig, noisy_all
     from training.events.simulate import simulate_clips

@@ -24,7 +24,6 @@ from inference.clipio import PlayerTracks
 from inference.players.evaluate import match_frames
 
 SIDES = ("near", "far")
-_LR = np.array([0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15])  # COCO-17 left ↔ right
 _WRISTS = (9, 10)
 _PAIRS = ((5, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16))  # left/right pairs that can be swapped
 
