@@ -165,12 +165,14 @@ class Session:
     def tick(self, dt: float) -> None:
         """Advance when playing and redraw if the frame changed."""
         with self.lock:
+            was_playing = self.playback.playing
             before = self.playback.frame
             frame = self.playback.advance(dt)
+            ended = was_playing and not self.playback.playing
         if frame != before:
             self.render()
-        if not self.playback.playing and self.panel.play.value:
-            self._set_play(False)  # stopped at the end (no loop)
+        if ended:  # stopped at the end (no loop): only then uncheck the box, never a click still on its way
+            self._set_play(False)
 
     def render(self, from_slider: bool = False) -> None:
         """Show the current frame: ball, trail, players, video overlay, shot text, slider position."""

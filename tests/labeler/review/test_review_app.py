@@ -204,3 +204,31 @@ def test_cli_export(reconstructed_clip, tmp_path, capsys):
     assert (tmp_path / "x" / "shots.csv").read_text().count("\n") == 7
     assert main(["review", str(tmp_path / "nothing")]) == 1
     assert "clip.yaml" in capsys.readouterr().err
+
+
+def test_tick_keeps_a_play_click_still_on_its_way_and_unchecks_at_the_end():
+    """The browser's play box is checked (value True) before its callback starts the playback: the
+    background tick must not read that as "stopped at the end" and uncheck it (a lost click)."""
+    import threading
+    from types import SimpleNamespace
+
+    from labeler.review.app import Session
+    from labeler.review.playback import Playback
+
+    class Stub(SimpleNamespace):
+        def render(self):
+            self.renders += 1
+
+        def _set_play(self, playing):
+            self.playback.playing = playing
+            self.panel.play.value = playing
+
+    s = Stub(lock=threading.Lock(), playback=Playback(0, 10, 10.0, loop=False), panel=SimpleNamespace(play=SimpleNamespace(value=True)),
+             renders=0)
+    Session.tick(s, 0.1)                         # the click's value arrived, its callback not yet
+    assert s.panel.play.value is True and s.renders == 0
+    s.playback.playing = True                    # the callback runs
+    Session.tick(s, 0.5)
+    assert s.playback.frame == 5 and s.panel.play.value is True and s.renders == 1
+    Session.tick(s, 2.0)                         # past the last frame: stops there and unchecks the box
+    assert s.playback.frame == 10 and not s.playback.playing and s.panel.play.value is False
