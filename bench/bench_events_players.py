@@ -37,21 +37,16 @@ CONDITIONS = {
 
 def rendered(dirs: list[Path], backend: str = "movenet"):
     """Rendered clips as simulated ones (true ball, events, camera) and the players MoveNet finds in them."""
-    from bench_pose_stats import poses
+    from bench_pose_stats import players_of
 
-    from inference.clipio import Clip
-    from inference.court import load_court
-    from inference.players.tracking import players_from_poses
     from training.events.simulate import SimClip
 
     clips, players = [], []
     for d in dirs:
-        c = Clip(d)
-        cam = c.read_camera(gt=True)
+        c, _, pred = players_of(d, backend)
         clips.append(SimClip(f"{d.parent.name}/{d.name}", float(c.info.fps), int(c.info.width), int(c.info.height),
-                             c.n_frames, c.read_ball(), c.read_events(gt=True), cam))
-        seq = poses(d, Path("runs/pose_stats/cache"), backend)
-        players.append(players_from_poses(seq, cam, load_court(c.court_path()), c.info.fps))
+                             c.n_frames, c.read_ball(), c.read_events(gt=True), c.read_camera(gt=True)))
+        players.append(pred)
     return clips, players
 
 
@@ -77,11 +72,7 @@ def main(argv=None) -> None:
         source = f"{len(clips)} rendered clips, players from {args.backend} and the players stage"
     else:
         clips = simulate_clips(args.sport, args.clips, 6161, args.cache, progress=False, fps=args.fps, players=True)
-        cfg = PoseNoiseConfig()
-        if args.pose_noise:
-            import yaml
-
-            cfg = PoseNoiseConfig.from_dict(yaml.safe_load(args.pose_noise.read_text()))
+        cfg = PoseNoiseConfig.from_file(args.pose_noise) if args.pose_noise else PoseNoiseConfig()
         players = noisy_all(clips, 17, cfg)
         source = (f"{len(clips)} held-out simulated rallies (seed 6161) at {args.fps:g} fps, players from pose-backend "
                   f"noise ({args.pose_noise or 'the default settings'})")

@@ -74,7 +74,6 @@ def main(argv=None) -> None:
     ap.add_argument("--pose-noise", type=Path, help="pose-noise settings (YAML), e.g. conf/data/pose_noise/movenet_measured.yaml")
     args = ap.parse_args(argv)
     import torch
-    import yaml
 
     from bench_events_players import GAPS
     from inference.court import load_court
@@ -86,7 +85,7 @@ def main(argv=None) -> None:
     logging.getLogger("inference.events.detector").setLevel(logging.ERROR)
     torch.set_num_threads(1)
     clips = simulate_clips("tennis", args.clips, 6161, args.cache, progress=False, fps=50, players=True)
-    cfg = PoseNoiseConfig.from_dict(yaml.safe_load(args.pose_noise.read_text())) if args.pose_noise else PoseNoiseConfig()
+    cfg = PoseNoiseConfig.from_file(args.pose_noise) if args.pose_noise else PoseNoiseConfig()
     noisy = noisy_all(clips, 17, cfg)
     tracks = degrade_all(clips, 11, DegradeConfig(**GAPS))
     det = EventDetector.from_checkpoint(args.weights, sport="tennis")

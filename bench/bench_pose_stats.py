@@ -38,7 +38,7 @@ KEYS = ("miss_frac", "bridged_frac", "body_sigma_px", "wrist_sigma_px", "body_ji
 
 
 def poses(clip_dir: Path, cache: Path, backend_name: str):
-    """The backend's poses of one clip (cached as ``cache/<parent>_<clip>.npz``)."""
+    """The backend's poses of one clip (cached as ``cache/<parent>_<clip>_<backend>@<input size>.npz``)."""
     from inference.clipio import Clip
     from inference.players.backends import make_backend
     from inference.players.types import Persons, PoseSequence
@@ -67,6 +67,22 @@ def poses(clip_dir: Path, cache: Path, backend_name: str):
     return seq
 
 
+CACHE = Path("runs/pose_stats/cache")
+
+
+def players_of(clip_dir: Path, backend_name: str = "movenet", cache: Path = CACHE):
+    """The clip, the backend's poses (cached, :func:`poses`) and the players stage's players from them, as
+    ``rally3d players`` writes them (the clip's true camera)."""
+    from inference.clipio import Clip
+    from inference.court import load_court
+    from inference.players.tracking import players_from_poses
+
+    clip = Clip(clip_dir)
+    seq = poses(clip_dir, cache, backend_name)
+    pred = players_from_poses(seq, clip.read_camera(gt=True), load_court(clip.court_path()), clip.info.fps)
+    return clip, seq, pred
+
+
 def simulated(truths, settings: dict, seed: int = 0):
     """The truths' exact players through the noise model with ``settings`` (pose_noise.noisy_players)."""
     from training.events.pose_noise import PoseNoiseConfig, noisy_players
@@ -84,9 +100,6 @@ def simulated(truths, settings: dict, seed: int = 0):
 def main(argv=None) -> dict:
     import yaml
 
-    from inference.clipio import Clip
-    from inference.court import load_court
-    from inference.players.tracking import players_from_poses
     from training.events.pose_stats import PoseClipTruth, measure_players, pose_noise_settings, refine_settings
 
     ap = argparse.ArgumentParser()
@@ -94,15 +107,13 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="conf/data/pose_noise/movenet_measured.yaml")
     ap.add_argument("--backend", default="movenet",
                     help="pose backend; movenet@640: MoveNet at a 640-px input (default: its size for the frame)")
-    ap.add_argument("--cache", type=Path, default=Path("runs/pose_stats/cache"))
+    ap.add_argument("--cache", type=Path, default=CACHE)
     ap.add_argument("--steps", type=int, default=3, help="correction steps of the settings (refine_settings)")
     args = ap.parse_args(argv)
     t0 = time.process_time()
     truths, names = [], []
     for d in args.clips:
-        clip = Clip(d)
-        seq = poses(d, args.cache, args.backend)
-        pred = players_from_poses(seq, clip.read_camera(gt=True), load_court(clip.court_path()), clip.info.fps)
+        clip, seq, pred = players_of(d, args.backend, args.cache)
         truths.append(PoseClipTruth.from_clip(clip, pred, seq))
         names.append(f"{d.parent.name}/{d.name} ({clip.info.sport}, {clip.info.camera_id or 'camera'}, "
                      f"{clip.info.fps:g} fps, {clip.info.width}x{clip.info.height}, {clip.n_frames} frames)")

@@ -113,6 +113,14 @@ class PoseNoiseConfig:
             d = {k: v for k, v in dict(d).items() if k != "measured"}
         return config_from_dict(cls, d, "data.pose_noise")
 
+    @classmethod
+    def from_file(cls, path) -> PoseNoiseConfig:
+        """Settings from a YAML file such as ``conf/data/pose_noise/movenet_measured.yaml``."""
+        import yaml
+        from pathlib import Path
+
+        return cls.from_dict(yaml.safe_load(Path(path).read_text()))
+
 
 _LR = np.array([0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15])  # COCO-17 left ↔ right
 _WRISTS = [9, 10]

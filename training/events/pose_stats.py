@@ -23,6 +23,8 @@ import numpy as np
 from inference.clipio import PlayerTracks
 from inference.players.evaluate import match_frames
 
+from .track_stats import run_lengths
+
 SIDES = ("near", "far")
 _WRISTS = (9, 10)
 _PAIRS = ((5, 6), (7, 8), (9, 10), (11, 12), (13, 14), (15, 16))  # left/right pairs that can be swapped
@@ -61,12 +63,6 @@ def bridged_rows(c: PoseClipTruth, tol_px: float = 3.0) -> np.ndarray:
             d = np.nanmean(np.linalg.norm(persons.keypoints - kp[None], axis=2), axis=1)
         out[i] = not (np.nanmin(d) <= tol_px) if np.isfinite(d).any() else True
     return out
-
-
-def _runs(mask: np.ndarray) -> list[int]:
-    """Lengths of the runs of True in a 1-D boolean mask."""
-    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    return list(np.flatnonzero(d == -1) - np.flatnonzero(d == 1))
 
 
 def _robust_sigma(x: np.ndarray) -> float:
@@ -182,7 +178,7 @@ def _add_bridged(sides: dict[str, _Side], c: PoseClipTruth) -> None:
         side = str(c.pred.team[rows[0]])
         if side in SIDES:
             sides[side].bridged.append(float(bridged[rows].mean()))
-            sides[side].bridged_runs_s += [n / c.fps for n in _runs(bridged[rows])]
+            sides[side].bridged_runs_s += [n / c.fps for n in run_lengths(bridged[rows])]
 
 
 def _lag_corr(pairs: list) -> float:
@@ -209,7 +205,7 @@ def _measure_player(st: _Side, c: PoseClipTruth, gid: int, side: str, matches: d
         return []
     found = np.array([any(g == gid for g, _ in matches.get(int(f), [])) for f in frames])
     st.miss_frac.append(float(1.0 - found.mean()))
-    st.miss_runs_s += [n / c.fps for n in _runs(~found)]
+    st.miss_runs_s += [n / c.fps for n in run_lengths(~found)]
     st.seconds += len(frames) / c.fps
     flipped = np.zeros(len(frames), bool)
     outlier = np.zeros((len(frames), 2), bool)
@@ -231,8 +227,8 @@ def _measure_player(st: _Side, c: PoseClipTruth, gid: int, side: str, matches: d
         body_by_frame[int(f)] = np.where(r.body[:, None], r.err, np.nan)
         prev, prev_f = r, f
     st.flip_frames += int(flipped.sum())
-    st.flip_runs_s += [n / c.fps for n in _runs(flipped)]
-    st.outlier_runs_s += [n / c.fps for j in range(2) for n in _runs(outlier[:, j])]
+    st.flip_runs_s += [n / c.fps for n in run_lengths(flipped)]
+    st.outlier_runs_s += [n / c.fps for j in range(2) for n in run_lengths(outlier[:, j])]
     st.lag_pairs += [np.stack([e, body_by_frame[f + lag]]) for f, e in body_by_frame.items() if f + lag in body_by_frame]
     return errors
 

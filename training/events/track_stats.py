@@ -71,7 +71,7 @@ def _ball_radius(sport: str | None) -> float:
         return 0.033
 
 
-def _runs(mask: np.ndarray) -> list[int]:
+def run_lengths(mask: np.ndarray) -> list[int]:
     """Lengths of the runs of True in ``mask``."""
     m = np.concatenate([[False], np.asarray(mask, bool), [False]])
     d = np.diff(m.astype(int))
@@ -127,7 +127,7 @@ def measure_clips(pairs: list[tuple[ClipTruth, BallTrack]], tau_px: float = 10.0
             acc[key].append(near[key])
         # gaps: runs of misses while the ball is in the image (a run ends where the ball leaves the image)
         gap_mask = o["miss"].copy()
-        acc["gap_s"] += [r / truth.fps for r in _runs(gap_mask)]
+        acc["gap_s"] += [r / truth.fps for r in run_lengths(gap_mask)]
         acc["false"].append(o["false"])
         acc["seen"].append(o["false"] | o["hit"])
         acc["far_px"].append(np.where(o["false"] & o["visible"], o["err_px"], np.nan) * 1280.0 / truth.width)

@@ -233,12 +233,11 @@ def test_far_players_can_flip_at_their_own_rate(clip):
 
 
 def test_measured_settings_file_loads():
-    import yaml
     from pathlib import Path
 
     for name in ("movenet_measured", "movenet960_measured"):
         path = Path(__file__).resolve().parents[3] / f"conf/data/pose_noise/{name}.yaml"
-        cfg = PoseNoiseConfig.from_dict(yaml.safe_load(path.read_text()))
+        cfg = PoseNoiseConfig.from_file(path)
         assert cfg.fill_gap_s > 0 and cfg.bias_rel[1] > 0 and cfg.wrist_outlier_near > 0
     with pytest.raises(ValueError, match="bias_s"):
         PoseNoiseConfig(bias_s=0)
