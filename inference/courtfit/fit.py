@@ -283,7 +283,7 @@ def _centreline_rms(cam: Camera, segments: np.ndarray, pixels: np.ndarray, scale
     """RMS offset (full px) of the painted bands' centres from the fitted lines: line pixels within 2 working
     px of a projected segment, their signed distances averaged in bins of ``bin_px`` working px along it
     (a band's width averages out; its centre's offset remains)."""
-    layout = camera_layout("square", 1 if cam.dist is not None else 0, "centre", cam.image_size)
+    layout = camera_layout("square", _n_dist(cam), "centre", cam.image_size)
     p = layout.pack(cam)
     polys = _polyline_points(segments, layout.n_dist)
     proj = _project(layout, p, polys)
@@ -361,24 +361,36 @@ def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Ca
         return None
 
 
+def _n_dist(cam: Camera) -> int:
+    """Radial coefficients a fitted camera carries: 0, 1 (k1) or 2 (k1, k2)."""
+    return 0 if cam.dist is None else (2 if cam.dist[1] != 0 else 1)
+
+
 def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence,
                      distortion: str) -> _Candidate:
-    """Refit with k1 and keep it when it explains clearly more painted line (2 % of the visible length), or
-    as much with the bands' centres clearly closer to the lines (15 % lower centre-line RMS), or a little
-    more (0.5 %) with them closer (10 %)."""
+    """Refit with k1, then k1 and k2, each kept when it explains clearly more painted line (2 % of the
+    visible length), or puts the bands' centres closer to the lines (5 % lower centre-line RMS) while
+    explaining about as much (within 2 %). A lens without distortion fits k1 ≈ 0 and changes nothing."""
     if distortion == "none":
         return best
-    cam1, res1, _ = refine_on_lines(best.camera, model.segments_3d, pixels, ev.scale, n_dist=1)
-    k1_cand = _evaluate(cam1, res1, ev, model)
-    if distortion == "k1":
-        return k1_cand
-    if k1_cand.score > best.score + 0.02 * best.visible:
-        return k1_cand
-    rms0 = _centreline_rms(best.camera, model.segments_3d, pixels, ev.scale)
-    rms1 = _centreline_rms(k1_cand.camera, model.segments_3d, pixels, ev.scale)
-    better = (rms1 < 0.85 * rms0 and k1_cand.score > best.score - 0.01 * best.visible) or \
-        (rms1 < 0.9 * rms0 and k1_cand.score > best.score + 0.005 * best.visible)
-    return k1_cand if better else best
+    for n_dist in (1, 2):
+        cam1, res1, _ = refine_on_lines(best.camera, model.segments_3d, pixels, ev.scale, n_dist=n_dist)
+        cand = _evaluate(cam1, res1, ev, model)
+        if distortion == "k1":
+            return cand
+        if not _clearly_better(cand, best, model, pixels, ev):
+            break
+        best = cand
+    return best
+
+
+def _clearly_better(new: _Candidate, old: _Candidate, model: CourtLines, pixels: np.ndarray,
+                    ev: LineEvidence) -> bool:
+    if new.score > old.score + 0.02 * old.visible:
+        return True
+    rms0 = _centreline_rms(old.camera, model.segments_3d, pixels, ev.scale)
+    rms1 = _centreline_rms(new.camera, model.segments_3d, pixels, ev.scale)
+    return bool(rms1 < 0.95 * rms0 and new.score > old.score - 0.02 * old.visible)
 
 
 def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: float = 3.0, n: int = 24) -> float:
@@ -428,7 +440,7 @@ def _without_rail(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: L
     conf = confused_segments(best.camera, model, ev.scale)
     if not conf.any():
         return best
-    n_dist = 0 if best.camera.dist is None else 1
+    n_dist = _n_dist(best.camera)
     # two refits: all lines and the rails from the fit; and, when the confused paint has pulled the fit onto
     # the rail's edge (the paint hidden behind it), out of the rails' reach: a refit without that paint first,
     # then with the rails. The one that explains more line pixels is kept.
