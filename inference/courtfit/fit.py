@@ -54,6 +54,9 @@ COVERAGE_STEP_M = 0.1
 BANDS = (6.0, 3.0, 2.0)  # working px: pixels this close to a projected line are assigned to it, per round
 CONFUSION_PX = 16.0  # working px: a painted line whose image runs this close to a near rail's is not trusted
 CONFUSION_SHARE = 0.5  # ... along at least this share of its visible length
+MIN_GAIN_CLEAR = 1.2  # a refit without the paint along a rail is kept when it explains this many times the pixels
+MAX_NEAR_CHECK_PX = 6.0  # working px: the nearest transverse line, left out, moves at most this far (_near_line_check)
+TAPE_CENTRE_M = 0.025  # the net's tape (5-6 cm) hangs from its top: its centre line is this far below
 
 
 class AutoFitError(RuntimeError):
@@ -75,6 +78,8 @@ class AutoFit:
         margin: score of the fit over that of the best different candidate (inf when there is none).
         unexplained: share of the line pixels inside the fitted court's floor on none of its modelled lines
             (NaN when too few; see :func:`unexplained_share`).
+        near_check_px: how far (full-resolution px) the nearest painted transverse line moves when the camera
+            is refitted without it (see :func:`_near_line_check`; refused above 6 working px).
         reason: why the fit was rejected ("" when accepted).
         frames: the frame indices whose median was used.
         cpu_seconds: CPU time of the fit (frame decoding included when :func:`fit_court` read them).
@@ -89,6 +94,7 @@ class AutoFit:
     lines_supported: tuple[int, int] = (0, 0)
     margin: float = 0.0
     unexplained: float = float("nan")
+    near_check_px: float = float("nan")
     reason: str = ""
     frames: list[int] = field(default_factory=list)
     cpu_seconds: float = 0.0
@@ -102,6 +108,7 @@ class AutoFit:
                 "lines_supported": list(self.lines_supported),
                 "margin": None if not np.isfinite(self.margin) else round(float(self.margin), 3),
                 "unexplained": None if not np.isfinite(self.unexplained) else round(float(self.unexplained), 3),
+                "near_check_px": None if not np.isfinite(self.near_check_px) else round(self.near_check_px, 2),
                 "frames": list(self.frames), "reason": self.reason}
 
     def summary(self) -> str:
@@ -361,6 +368,11 @@ def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Ca
         return None
 
 
+def _tape(model: CourtLines) -> np.ndarray:
+    """(R, 2, 3) the centre line of the net's white tape: the net's top lowered by :data:`TAPE_CENTRE_M`."""
+    return model.raised - np.array([0.0, 0.0, TAPE_CENTRE_M])
+
+
 def _n_dist(cam: Camera) -> int:
     """Radial coefficients a fitted camera carries: 0, 1 (k1) or 2 (k1, k2)."""
     return 0 if cam.dist is None else (2 if cam.dist[1] != 0 else 1)
@@ -442,14 +454,19 @@ def _without_rail(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: L
         return best
     n_dist = _n_dist(best.camera)
     # two refits: all lines and the rails from the fit; and, when the confused paint has pulled the fit onto
-    # the rail's edge (the paint hidden behind it), out of the rails' reach: a refit without that paint first,
-    # then with the rails. The one that explains more line pixels is kept.
+    # the rail's edge (the paint hidden behind it), out of the rails' reach: a refit without that paint but
+    # with the net's tape (which then takes the near line's part in fixing the camera's depth) first, then
+    # with the rails. The second is kept only when it explains clearly more line pixels (MIN_GAIN_CLEAR):
+    # without the paint, the rail can take a visible painted line's pixels.
     clear = model.segments_3d[~conf]
-    start, _, _ = refine_on_lines(best.camera, clear, pixels, ev.scale, n_dist=n_dist)
-    refits = [refine_on_lines(best.camera, np.concatenate([model.segments_3d, model.structure]), pixels, ev.scale,
-                              n_dist=n_dist),
-              refine_on_lines(start, np.concatenate([clear, model.structure]), pixels, ev.scale, n_dist=n_dist)]
-    cam, res, _ = max(refits, key=lambda r: len(r[1]))
+    start, _, _ = refine_on_lines(best.camera, np.concatenate([clear, _tape(model)]), pixels, ev.scale,
+                                  n_dist=n_dist)
+    cam, res, _ = refine_on_lines(best.camera, np.concatenate([model.segments_3d, model.structure]), pixels,
+                                  ev.scale, n_dist=n_dist)
+    cam2, res2, _ = refine_on_lines(start, np.concatenate([clear, model.structure]), pixels, ev.scale,
+                                    n_dist=n_dist)
+    if len(res2) >= MIN_GAIN_CLEAR * len(res):
+        cam, res = cam2, res2
     cand = _evaluate(cam, res, ev, model)
     cand.confused = conf
     return cand
@@ -581,12 +598,44 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, 
     if out.unexplained > MAX_UNEXPLAINED:
         problems.append(f"{100 * out.unexplained:.0f} % of the line pixels on the fitted court's floor lie on none "
                         "of its lines (the court may be placed on the walls' rails)")
+    near = _near_line_check(best, model, pixels, ev)
+    out.near_check_px = near / ev.scale
+    if near > MAX_NEAR_CHECK_PX:
+        problems.append(f"the nearest painted line across is {out.near_check_px:.0f} px from where the "
+                        "other lines and the net put it (it may be fitted on a rail or the fence's wires)")
     if not (c[2] > 1.0 and c[1] < court.net_y):
         problems.append(f"implausible camera position {np.round(c, 1).tolist()}")
     out.accepted = not problems
     out.reason = "; ".join(problems)
     cam.source = "auto"
     cam.meta["auto"] = out.meta()
+
+
+def _near_line_check(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev: LineEvidence) -> float:
+    """Leave-one-out check of the near court (working px): the camera refitted without the nearest painted
+    transverse line in view, on the other lines and the net's tape; how far (max over its visible length)
+    that line moves. The nearest line fixes the camera's depth more than any other, and a rail or a fence
+    wire next to it can take its place; the rest of the court then puts it elsewhere. 0 when fewer than two
+    transverse lines are in view."""
+    cam = best.camera
+    w, h = cam.image_size
+    segs = model.segments_3d
+    seen = []
+    for i, (a, b) in enumerate(segs):
+        if abs(a[1] - b[1]) > 1e-9:
+            continue
+        p = cam.project(a + np.linspace(0, 1, 20)[:, None] * (b - a))
+        ok = np.isfinite(p).all(1) & (p[:, 0] >= 0) & (p[:, 0] < w) & (p[:, 1] >= 0) & (p[:, 1] < h)
+        if ok.sum() >= 5:
+            seen.append((a[1], i, p, ok))
+    if len(seen) < 2:
+        return 0.0
+    _, i, before, ok = min(seen, key=lambda r: r[0])
+    rest = np.concatenate([np.delete(segs, i, axis=0), _tape(model)])
+    cam2, _, _ = refine_on_lines(cam, rest, pixels, ev.scale, n_dist=_n_dist(cam))
+    a, b = segs[i]
+    after = cam2.project(a + np.linspace(0, 1, 20)[:, None] * (b - a))
+    return float(np.max(np.linalg.norm(after[ok] - before[ok], axis=1)) * ev.scale)
 
 
 def sample_frame_indices(n_frames: int, n: int = N_FRAMES, start: int = 0, stop: int | None = None) -> list[int]:
