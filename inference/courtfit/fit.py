@@ -5,8 +5,8 @@
    homography, scored on the line pixels;
 3. the best few: a camera from the homography's crossing points by the coplanar calibration
    (:func:`inference.calibration.calibrate`: Zhang's constraints, then f, R, t), refined on the distances of
-   line pixels to the projected court lines (robust least squares; radial distortion k1 kept when it
-   explains the lines clearly better), rescored;
+   line pixels to the projected court lines (robust least squares; radial distortion k1, then k1 and k2,
+   kept when they explain the lines clearly better), rescored;
 4. the gate: the fit is *accepted* only when enough of the visible court lines are found on line pixels
    (coverage), the pixels sit close to the lines (line RMS), lines of both directions are supported, the
    runner-up explains clearly less (margin; a rival that lays a painted line on the near wall's top rail is
@@ -15,7 +15,9 @@
    the image (a camera right behind the glass, where the rail hides or doubles the near service line) has
    the fit refined with the rails as lines of their own; it then needs a larger margin (rivals the gate
    would refuse on their own count only when the rails are not found along most of their length) and that
-   paint or a rail found. A rejected fit says why; nothing downstream uses it silently.
+   paint or a rail found. Last, the nearest painted line across must stay where the fit puts it when the
+   camera is refitted without it (:func:`_near_line_check`). A rejected fit says why; nothing downstream
+   uses it silently.
 
 Example:
     >>> fit = fit_court(Clip("runs/clip"), load_court("padel"))
@@ -398,6 +400,7 @@ def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev
 
 def _clearly_better(new: _Candidate, old: _Candidate, model: CourtLines, pixels: np.ndarray,
                     ev: LineEvidence) -> bool:
+    """Whether a refit with more lens terms is worth keeping (the rule of :func:`_with_distortion`)."""
     if new.score > old.score + 0.02 * old.visible:
         return True
     rms0 = _centreline_rms(old.camera, model.segments_3d, pixels, ev.scale)
@@ -480,7 +483,8 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     Args:
         frames: RGB uint8 (H, W, 3) frames of the view (their median is used; 5–15 spread over the clip).
         court: the court model (its ``lines.paint`` floor segments are fitted).
-        distortion: ``auto`` (k1 when it explains the lines clearly better), ``none`` or ``k1``.
+        distortion: ``auto`` (k1, then k1 and k2, when they explain the lines clearly better), ``none`` or
+            ``k1``.
         n_candidates: correspondence hypotheses refined.
         frame_indices: recorded in the result.
     """
