@@ -624,22 +624,17 @@ def _near_line_check(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev
     cam = best.camera
     w, h = cam.image_size
     segs = model.segments_3d
-    seen = []
-    for i, (a, b) in enumerate(segs):
-        if abs(a[1] - b[1]) > 1e-9:
-            continue
-        p = cam.project(a + np.linspace(0, 1, 20)[:, None] * (b - a))
-        ok = np.isfinite(p).all(1) & (p[:, 0] >= 0) & (p[:, 0] < w) & (p[:, 1] >= 0) & (p[:, 1] < h)
-        if ok.sum() >= 5:
-            seen.append((a[1], i, p, ok))
+    polys = _projected_polylines(cam, segs, 20)
+    ok = np.isfinite(polys).all(2) & (polys[..., 0] >= 0) & (polys[..., 0] < w) & (polys[..., 1] >= 0) & \
+        (polys[..., 1] < h)
+    seen = [i for i, (a, b) in enumerate(segs) if abs(a[1] - b[1]) < 1e-9 and ok[i].sum() >= 5]
     if len(seen) < 2:
         return 0.0
-    _, i, before, ok = min(seen, key=lambda r: r[0])
+    i = min(seen, key=lambda k: segs[k, 0, 1])
     rest = np.concatenate([np.delete(segs, i, axis=0), _tape(model)])
     cam2, _, _ = refine_on_lines(cam, rest, pixels, ev.scale, n_dist=_n_dist(cam))
-    a, b = segs[i]
-    after = cam2.project(a + np.linspace(0, 1, 20)[:, None] * (b - a))
-    return float(np.max(np.linalg.norm(after[ok] - before[ok], axis=1)) * ev.scale)
+    after = _projected_polylines(cam2, segs[i : i + 1], 20)[0]
+    return float(np.max(np.linalg.norm(after[ok[i]] - polys[i][ok[i]], axis=1)) * ev.scale)
 
 
 def sample_frame_indices(n_frames: int, n: int = N_FRAMES, start: int = 0, stop: int | None = None) -> list[int]:
