@@ -59,6 +59,7 @@ CONFUSION_SHARE = 0.5  # ... along at least this share of its visible length
 MIN_GAIN_CLEAR = 1.2  # a refit without the paint along a rail is kept when it explains this many times the pixels
 MAX_NEAR_CHECK_PX = 6.0  # working px: the nearest transverse line, left out, moves at most this far (_near_line_check)
 TAPE_CENTRE_M = 0.025  # the net's tape (5-6 cm) hangs from its top: its centre line is this far below
+DISTORTION_SEARCH = (-0.15,)  # lens guesses (image k1, radius in half-diagonals) searched when a fit is refused
 
 
 class AutoFitError(RuntimeError):
@@ -157,16 +158,18 @@ def _project(layout: CameraLayout, p: np.ndarray, X: np.ndarray) -> np.ndarray:
 def _signed_distance(pix: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """(N, 2) pixels, (K, 2) polyline → (N,) signed distance to the nearest piece of the polyline."""
     A, B = poly[:-1], poly[1:]
-    AB = B - A
-    L2 = np.maximum(np.sum(AB * AB, axis=1), 1e-12)
-    AP = pix[:, None, :] - A[None]
-    t = np.clip(np.sum(AP * AB[None], axis=2) / L2, 0.0, 1.0)
-    D = AP - t[..., None] * AB[None]
-    d = np.linalg.norm(D, axis=2)
-    j = np.argmin(d, axis=1)
+    abx, aby = B[:, 0] - A[:, 0], B[:, 1] - A[:, 1]
+    L2 = np.maximum(abx * abx + aby * aby, 1e-12)
+    apx = pix[:, :1] - A[None, :, 0]  # (N, K-1): coordinates spelled out, no reductions over a length-2 axis
+    apy = pix[:, 1:2] - A[None, :, 1]
+    t = np.clip((apx * abx + apy * aby) / L2, 0.0, 1.0)
+    dx, dy = apx - t * abx, apy - t * aby
+    d2 = dx * dx + dy * dy
+    j = np.argmin(d2, axis=1)
     rows = np.arange(len(pix))
-    sign = np.sign(AB[j, 0] * AP[rows, j, 1] - AB[j, 1] * AP[rows, j, 0])
-    return np.where(sign == 0, 1.0, sign) * d[rows, j]
+    d = np.sqrt(d2[rows, j])
+    sign = np.sign(abx[j] * apy[rows, j] - aby[j] * apx[rows, j])
+    return np.where(sign == 0, 1.0, sign) * d
 
 
 def _polyline_points(segments: np.ndarray, n_dist: int) -> np.ndarray:
@@ -278,7 +281,7 @@ def _support(cam: Camera, ev: LineEvidence, segments: np.ndarray) -> list[tuple[
         xy = (cam.project(a + np.linspace(0, 1, n)[:, None] * (b - a)) + 0.5) * ev.scale - 0.5
         step = np.linalg.norm(np.diff(xy, axis=0, append=xy[-1:]), axis=1)
         wgt = np.where(np.isfinite(step), step, 0.0)
-        r = np.round(np.nan_to_num(xy, nan=-1.0)).astype(int)
+        r = np.round(np.nan_to_num(xy, nan=-1.0, posinf=-1.0, neginf=-1.0)).astype(int)
         ok = np.isfinite(xy).all(1) & (r[:, 0] >= 0) & (r[:, 0] < ww) & (r[:, 1] >= 0) & (r[:, 1] < hh)
         d = np.full(n, np.inf)
         d[ok] = ev.distance[r[ok, 1], r[ok, 0]]
@@ -495,28 +498,82 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
     size = (w, h)
     model = court_lines(court)
     scale = working_scale(size)
-    ev = LineEvidence.from_mask(line_mask(background(frames, scale)), scale, size)
-    out = AutoFit(None, False, frames=list(frame_indices or []))
-    trans, longi = split_lines(hough_lines(ev), size)
-    Hs = hypotheses(trans, longi, model, size, court.net_y)
-    hyps = best_hypotheses(Hs, ev, model, n_candidates)
+    bg = background(frames, scale)
+    ev = LineEvidence.from_mask(line_mask(bg), scale, size)
     rng = np.random.default_rng(0)
     pixels = ev.pixels if len(ev.pixels) <= MAX_PIXELS else ev.pixels[rng.choice(len(ev.pixels), MAX_PIXELS,
                                                                                  replace=False)]
+    cands, found = _candidates(ev, ev, model, size, court.net_y, pixels, n_candidates)
+    out = _select(cands, ev, court, model, pixels, distortion, frame_indices)
+    if not out.accepted and distortion == "auto":
+        # a strong barrel lens bends the near lines too much for straight-line search: search again on the
+        # background undistorted by a guessed lens, refine on the real line pixels (k1 free), judge the lot
+        for k_img in DISTORTION_SEARCH:
+            ev_u = LineEvidence.from_mask(line_mask(_undistorted(bg, k_img, size, scale)), scale, size)
+            extra, _ = _candidates(ev_u, ev, model, size, court.net_y, pixels, n_candidates, k_img)
+            if extra and any(_lead(cands + extra, court, ev) is c for c in extra):  # else the same verdict
+                again = _select(cands + extra, ev, court, model, pixels, distortion, frame_indices)
+                if again.accepted or out.camera is None:
+                    out = again
+                if out.accepted:
+                    break
+    if out.camera is None:
+        out.reason = f"no court found ({found})"
+    out.cpu_seconds = time.process_time() - t0
+    return out
+
+
+def _undistorted(bg: np.ndarray, k_img: float, size: tuple[int, int], scale: float) -> np.ndarray:
+    """The working-scale background (h, w) as an ideal lens would see it, for a radial lens
+    ``x_d = x_u (1 + k_img r_u²)`` with image coordinates about the centre in half-diagonals (``k_img`` < 0:
+    barrel). Barrel distortion pulls the content in, so every output pixel samples inside the input."""
+    h, w = bg.shape[:2]
+    W, H = size
+    f0 = 0.5 * float(np.hypot(W, H))
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xu = ((xs + 0.5) / scale - 0.5 - W / 2) / f0
+    yu = ((ys + 0.5) / scale - 0.5 - H / 2) / f0
+    g = 1.0 + k_img * (xu * xu + yu * yu)
+    mx = ((W / 2 + f0 * xu * g + 0.5) * scale - 0.5).astype(np.float32)
+    my = ((H / 2 + f0 * yu * g + 0.5) * scale - 0.5).astype(np.float32)
+    return cv2.remap(bg, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _candidates(ev_search: LineEvidence, ev: LineEvidence, model: CourtLines, size: tuple[int, int], net_y: float,
+                pixels: np.ndarray, n_candidates: int, k_img: float = 0.0) -> tuple[list[_Candidate], str]:
+    """Correspondence hypotheses on ``ev_search`` (the background undistorted by ``k_img``, see
+    :func:`_undistorted`; ``ev`` itself when 0), each a camera refined on the real line pixels and evaluated
+    on ``ev``; and a note of what the search found."""
+    trans, longi = split_lines(hough_lines(ev_search), size)
+    Hs = hypotheses(trans, longi, model, size, net_y)
     cands: list[_Candidate] = []
-    for hyp in hyps:
+    f0 = 0.5 * float(np.hypot(*size))
+    for hyp in best_hypotheses(Hs, ev_search, model, n_candidates):
         start = _start_camera(hyp.H, model, size)
         if start is None:
             continue
-        cam, res, _ = refine_on_lines(start, model.segments_3d, pixels, scale)
+        n_dist = 0
+        if k_img:
+            # the same lens in the camera's own normalised coordinates: k1 = k_img (f / f0)²
+            k1 = k_img * (start.K[0, 0] / f0) ** 2
+            start = Camera.from_krt(start.K, start.R, start.t, size, dist=[k1, 0.0, 0.0, 0.0, 0.0])
+            n_dist = 1
+        cam, res, _ = refine_on_lines(start, model.segments_3d, pixels, ev.scale, n_dist=n_dist)
         cands.append(_evaluate(cam, res, ev, model))
+    return cands, (f"{len(trans)} transverse and {len(longi)} longitudinal lines, "
+                   f"{len(Hs)} plausible correspondences")
+
+
+def _select(cands: list[_Candidate], ev: LineEvidence, court: Court, model: CourtLines, pixels: np.ndarray,
+            distortion: str, frame_indices: list[int] | None) -> AutoFit:
+    """The fit from refined candidates: the best placeable one, its lens and rail refits, its margin over
+    the rivals, judged by the gate (:func:`_judge`). No camera when there is no candidate."""
+    out = AutoFit(None, False, frames=list(frame_indices or []))
     if not cands:
-        out.reason = (f"no court found ({len(trans)} transverse and {len(longi)} longitudinal lines, "
-                      f"{len(Hs)} plausible correspondences)")
-        out.cpu_seconds = time.process_time() - t0
         return out
-    cands.sort(key=lambda c: -c.score)
-    lead = next((c for c in cands if _placeable(c, court, ev)), cands[0])
+    scale = ev.scale
+    cands = sorted(cands, key=lambda c: -c.score)
+    lead = _lead(cands, court, ev)
     best = _with_distortion(lead, model, pixels, ev, distortion)
     best = _without_rail(best, model, pixels, ev)
     others = [c for c in cands if c is not lead and not c.same_as(lead, model)]
@@ -530,8 +587,13 @@ def fit_court_frames(frames: list[np.ndarray], court: Court, distortion: str = "
                   if not confused_segments(c.camera, model, scale).any() and _placeable(c, court, ev)]
     margin = best.score / max(others[0].score, 1e-9) if others and others[0].score > 0 else float("inf")
     _judge(out, best, margin, best_confused, ev, court, model, pixels)
-    out.cpu_seconds = time.process_time() - t0
     return out
+
+
+def _lead(cands: list[_Candidate], court: Court, ev: LineEvidence) -> _Candidate:
+    """The best-scoring candidate that passes the gate's placement tests on its own, else the best."""
+    ranked = sorted(cands, key=lambda c: -c.score)
+    return next((c for c in ranked if _placeable(c, court, ev)), ranked[0])
 
 
 def _placeable(cand: _Candidate, court: Court, ev: LineEvidence) -> bool:
