@@ -300,12 +300,13 @@ class _Fit:
         return self.layout.camera(self.p, size)
 
 
-def _solve(layout: CameraLayout, p0: np.ndarray, world: np.ndarray, image: np.ndarray) -> _Fit | None:
+def _solve(layout: CameraLayout, p0: np.ndarray, world: np.ndarray, image: np.ndarray,
+           nfev_per_param: int = 400) -> _Fit | None:
     if 2 * len(world) < len(p0):
         raise CalibrationError(f"{len(world)} points are too few for {len(p0)} camera parameters")
     try:
         sol = least_squares(layout.residuals, p0, args=(world, image), method="lm", x_scale="jac",
-                            max_nfev=400 * len(p0))
+                            max_nfev=nfev_per_param * len(p0))
     except ValueError:
         return None
     if not np.all(np.isfinite(sol.x)) or sol.x[0] <= 0:
@@ -508,10 +509,26 @@ def calibrate(
                              focal_sigma, warnings)
 
 
-def _best_fit(layout: CameraLayout, starts: Sequence[Camera], world: np.ndarray, image: np.ndarray) -> _Fit | None:
+def _best_fit(layout: CameraLayout, starts: Sequence[Camera], world: np.ndarray, image: np.ndarray,
+              nfev_per_param: int = 400) -> _Fit | None:
     """The lowest-cost refinement over the starts (None when none converges)."""
-    fits = [f for f in (_solve(layout, layout.pack(c), world, image) for c in starts) if f is not None]
+    fits = [f for f in (_solve(layout, layout.pack(c), world, image, nfev_per_param) for c in starts)
+            if f is not None]
     return min(fits, key=lambda f: f.cost) if fits else None
+
+
+def coplanar_camera(world: np.ndarray, image_px: np.ndarray, image_size: tuple[int, int],
+                    nfev_per_param: int = 400) -> Camera | None:
+    """The camera of :func:`calibrate` for points on one plane, without its report (None when no start
+    converges). ``nfev_per_param`` bounds each start's refinement: a caller that tries many guessed
+    correspondences lowers it, since a start still wandering after ~50 evaluations per parameter is a
+    wrong guess, not a slow right one."""
+    world = np.asarray(world, dtype=float).reshape(-1, 3)
+    image_px = np.asarray(image_px, dtype=float).reshape(-1, 2)
+    size = (int(image_size[0]), int(image_size[1]))
+    fit = _best_fit(camera_layout("square", 0, "centre", size),
+                    plane_starts(world, image_px, size, fit_plane(world)), world, image_px, nfev_per_param)
+    return None if fit is None else fit.camera(size)
 
 
 def _general_fit(model: str, n_dist: int, principal_point: str, size: tuple[int, int], starts: list[Camera],

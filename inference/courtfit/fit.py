@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from inference.calibration import CalibrationError, CameraLayout, calibrate, camera_layout
+from inference.calibration import CalibrationError, CameraLayout, camera_layout, coplanar_camera
 from inference.camera import Camera
 from inference.court import Court
 from inference.masks import apply_mask, clip_mask
@@ -59,6 +59,8 @@ CONFUSION_SHARE = 0.5  # ... along at least this share of its visible length
 MIN_GAIN_CLEAR = 1.2  # a refit without the paint along a rail is kept when it explains this many times the pixels
 MAX_NEAR_CHECK_PX = 6.0  # working px: the nearest transverse line, left out, moves at most this far (_near_line_check)
 TAPE_CENTRE_M = 0.025  # the net's tape (5-6 cm) hangs from its top: its centre line is this far below
+START_NFEV_PER_PARAM = 50  # evaluations per parameter a start camera's refinement may take
+MIN_K2_REACH = 0.75  # k2 is tried only when the line pixels reach this share of the way to the image corners
 DISTORTION_SEARCH = (-0.15,)  # lens guesses (image k1, radius in half-diagonals) searched when a fit is refused
 
 
@@ -361,14 +363,16 @@ def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24)
 
 
 def _start_camera(H: np.ndarray, model: CourtLines, size: tuple[int, int]) -> Camera | None:
-    """The coplanar calibration (item 1) from the court-line crossings mapped by the homography."""
+    """The coplanar calibration (item 1) from the court-line crossings mapped by the homography; a start
+    still unconverged after :data:`START_NFEV_PER_PARAM` evaluations per parameter is given up (a wrong
+    correspondence: they ended metres off at costs 1e6–1e10 px², and took most of a slow fit's time)."""
     floor = model.crossings()
     P = np.concatenate([floor, np.ones((len(floor), 1))], axis=1) @ H.T
     if np.any(P[:, 2] <= 0):
         return None
     world = np.concatenate([floor, np.zeros((len(floor), 1))], axis=1)
     try:
-        return calibrate(world, P[:, :2] / P[:, 2:3], size).camera
+        return coplanar_camera(world, P[:, :2] / P[:, 2:3], size, START_NFEV_PER_PARAM)
     except CalibrationError:
         return None
 
@@ -391,6 +395,8 @@ def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev
     if distortion == "none":
         return best
     for n_dist in (1, 2):
+        if n_dist == 2 and _evidence_reach(best.camera, model, pixels, ev.scale) < MIN_K2_REACH:
+            break
         cam1, res1, _ = refine_on_lines(best.camera, model.segments_3d, pixels, ev.scale, n_dist=n_dist)
         cand = _evaluate(cam1, res1, ev, model)
         if distortion == "k1":
@@ -399,6 +405,19 @@ def _with_distortion(best: _Candidate, model: CourtLines, pixels: np.ndarray, ev
             break
         best = cand
     return best
+
+
+def _evidence_reach(cam: Camera, model: CourtLines, pixels: np.ndarray, scale: float) -> float:
+    """How far out the court's line pixels reach: the 99th percentile of their distance from the image centre
+    (pixels within 2 working px of a projected painted line), as a share of the distance to the corners."""
+    layout = camera_layout("square", _n_dist(cam), "centre", cam.image_size)
+    polys = _polyline_points(model.segments_3d, layout.n_dist)
+    groups = _assign(layout, layout.pack(cam), polys, pixels, 2.0 / scale)
+    used = np.concatenate([g for g in groups if len(g) >= 5] or [np.zeros(0, int)])
+    if not len(used):
+        return 0.0
+    centre = np.asarray(cam.image_size, float) / 2
+    return float(np.percentile(np.linalg.norm(pixels[used] - centre, axis=1), 99) / np.linalg.norm(centre))
 
 
 def _clearly_better(new: _Candidate, old: _Candidate, model: CourtLines, pixels: np.ndarray,
