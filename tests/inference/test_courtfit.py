@@ -13,7 +13,9 @@ from inference.cli import main
 from inference.clipio import Clip, write_video
 from inference.court import load_court
 from inference.courtfit import AutoFitError, fit_court, fit_court_frames, sample_frame_indices
-from inference.courtfit.fit import _distance_to_polylines, _line_distance_map, confused_segments, unexplained_share
+import inference.courtfit.fit as fitmod
+from inference.courtfit.fit import (MIN_K2_REACH, _distance_to_polylines, _evidence_reach, _line_distance_map,
+                                    _undistorted, confused_segments, unexplained_share)
 from inference.courtfit.lines import LineEvidence, background, line_mask, working_scale
 from inference.courtfit.model import court_lines
 from training.synth.generate import SynthConfig, SynthScene
@@ -99,7 +101,8 @@ def test_near_rail_marks_the_painted_line_it_runs_along():
     (1001, False, "nothing pins the near court", False),
     (517, True, "", True), (507, True, "", True), (501, True, "", True), (711, True, "", True), (613, True, "", True),
     (1209, True, "", True), (1213, True, "", True), (1217, True, "", True),
-    (1415, False, "nearest painted line across", False), (1555, False, "nearest painted line across", False)])
+    (1415, False, "nearest painted line across", False), (1555, False, "nearest painted line across", False),
+    (1649, True, "", True)])
 def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed, accepted, why, camera_right):
     """The bench's installed padel views (drawn size, half with lens distortion): 519 — the rail hides the near
     service line, whose paint pulled the fit onto the rail's lower edge (5 px off); refitted from a fit
@@ -121,7 +124,9 @@ def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed
     rail hides the near service line: the refit without it, started with the net's tape, is 1.3 px off
     (6 px before); 1415, 1555 — the near service line hidden below a dark rail, the fit lays it on the
     fence's lowest wires 9 / 13 px off (accepted before): refitted without it, the other lines and the net put
-    it 12 working px away: refused. An accepted fit is always within the goals; a refused one says why."""
+    it 12 working px away: refused; 1649 — a strong barrel lens (k1 −0.149) bends the near lines so much that
+    the straight-line search finds no right placement (see the next test): found on the undistorted background.
+    An accepted fit is always within the goals; a refused one says why."""
     scene = SynthScene.build(seed, SynthConfig(sport="padel", camera="padel_installed"))
     frames = [scene.frame(i)[0] for i in sample_frame_indices(scene.rally.n_frames, 9)]
     fit = fit_court_frames(frames, scene.court)
@@ -132,6 +137,57 @@ def test_installed_camera_behind_the_glass_is_fitted_or_refused_never_wrong(seed
         assert why in fit.reason
     if camera_right:
         assert _goals_met(fit, scene), fit.summary()
+
+
+def test_strong_barrel_lens_is_found_by_the_search_on_the_undistorted_background(monkeypatch):
+    """Bench seed 1649 (installed view, k1 −0.149): with straight-line search alone every placement found
+    lays the court on the rails and is refused; the second search, on the background undistorted by a
+    guessed lens, finds the court, and the fit on the real line pixels recovers k1."""
+    scene = SynthScene.build(1649, SynthConfig(sport="padel", camera="padel_installed"))
+    frames = [scene.frame(i)[0] for i in sample_frame_indices(scene.rally.n_frames, 9)]
+    fit = fit_court_frames(frames, scene.court)
+    assert fit.accepted and _goals_met(fit, scene), fit.summary()
+    assert abs(fit.camera.dist[0] - scene.camera.dist[0]) < 0.02
+    monkeypatch.setattr(fitmod, "DISTORTION_SEARCH", ())
+    plain = fit_court_frames(frames, scene.court)
+    assert not plain.accepted and "net is not where" in plain.reason
+
+
+def test_undistorted_background_straightens_a_line_bent_by_the_lens():
+    """A straight line drawn through a barrel lens (image k1 −0.15) is straight again after
+    :func:`_undistorted` with the same lens, and stays bent without it."""
+    W, H = 1280, 720
+    f0, k = 0.5 * np.hypot(W, H), -0.15
+    img = np.zeros((H, W), np.uint8)
+    xu = np.linspace(-0.8, 0.8, 6000)
+    yu = 0.35 + 0.05 * xu  # a straight line in ideal (undistorted) coordinates, half-diagonals about the centre
+    g = 1 + k * (xu**2 + yu**2)
+    xd, yd = W / 2 + f0 * xu * g, H / 2 + f0 * yu * g
+    img[np.round(yd).astype(int), np.round(xd).astype(int)] = 255
+
+    def straightness(im):
+        ys, xs = np.nonzero(im > 100)
+        A = np.stack([xs, np.ones_like(xs)], 1).astype(float)
+        coef, *_ = np.linalg.lstsq(A, ys.astype(float), rcond=None)
+        return float(np.max(np.abs(A @ coef - ys)))
+
+    assert straightness(img) > 8.0
+    assert straightness(_undistorted(img, k, (W, H), 1.0)) < 1.5
+
+
+def test_k2_is_not_tried_when_the_lines_stay_near_the_centre():
+    """k2 is only pinned by line pixels far out: pixels along the court lines within 40 % of the way to the
+    corners reach under :data:`MIN_K2_REACH`; the whole court seen from the installed camera, whose view it
+    fills, reaches more."""
+    scene = SynthScene.build(519, SynthConfig(sport="padel", camera="padel_installed", width=1280, height=720))
+    cam, model = scene.camera, court_lines(scene.court)
+    pts, _ = model.samples(0.02)
+    px = cam.project(np.concatenate([pts, np.zeros((len(pts), 1))], axis=1))
+    centre = np.array([640.0, 360.0])
+    r = np.linalg.norm(px - centre, axis=1) / np.linalg.norm(centre)
+    inside = np.isfinite(px).all(1) & (px >= 0).all(1) & (px[:, 0] < 1280) & (px[:, 1] < 720)
+    assert _evidence_reach(cam, model, px[inside & (r < 0.4)], 1.0) < 0.4 < MIN_K2_REACH
+    assert _evidence_reach(cam, model, px[inside], 1.0) > MIN_K2_REACH
 
 
 def test_unexplained_share_is_low_for_the_true_camera_and_high_for_a_shifted_one():
