@@ -18,6 +18,10 @@
    paint or a rail found. Last, the nearest painted line across must stay where the fit puts it when the
    camera is refitted without it (:func:`_near_line_check`). A rejected fit says why; nothing downstream
    uses it silently.
+5. a refused fit searches again on the background undistorted by a guessed strong barrel lens
+   (:data:`DISTORTION_SEARCH`, :func:`_undistorted`): such a lens bends the near lines past what straight
+   image lines follow. Those placements are refined on the real line pixels (k1 free) and judged with the
+   first search's; the result replaces the refusal only when the gate accepts it.
 
 Example:
     >>> fit = fit_court(Clip("runs/clip"), load_court("padel"))
