@@ -15,7 +15,8 @@ serve (:func:`after_toss`). Sports whose serve bounces first (padel) keep that b
 
 The end: with a camera, by the rules where the bounces land on the court (:func:`rule_end`: after a hit
 the ball must first land in the other half, inside the lines; the net, a wall first, out, or a second
-bounce in one half end the point); else the second floor bounce after a hit; else, when the events stop
+bounce in one half end the point); else the second floor bounce after a hit (not when the camera puts
+the two in opposite halves: a hit was missed between them); else, when the events stop
 (a gap of ``gap_s`` in the track, no event for ``max_flight_s``), where the ball is lost, stands still,
 or ``dead_s`` after the last event. Times are in seconds and distances in image heights, so the
 constants hold at 25–60 fps.
@@ -174,7 +175,8 @@ def sharpest_turn(xy: np.ndarray, lo: int, hi: int, aspect: float) -> int | None
 def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels: list[str], hits, aspect: float,
               params: RallyParams, land: np.ndarray | None = None, sides: CourtSides | None = None) -> tuple[int, int]:
     """``(end frame, index of the last rally event + 1)`` given the serve frame and the sorted events:
-    the point is over at the second floor bounce after a hit, or, when the events stop (a gap of
+    the point is over at the second floor bounce after a hit (two bounces that ``land`` puts in opposite
+    halves are not: a hit between them was missed), or, when the events stop (a gap of
     ``gap_s``, no event for ``max_flight_s``), where the ball is lost, stands still or ``dead_s`` later."""
     T = len(xy)
     seen = np.isfinite(xy).all(axis=1)
@@ -187,14 +189,20 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
                                      or frames[j] - (frames[j - 1] if j > k else start) > max_flight
                                      for j in range(k, i + 1)):
             return int(frames[i]), i + 1
-    last, bounces = k, 0  # events [.., last) are in the rally
+    last, bounces, half = k, 0, None  # events [.., last) are in the rally; half: of the last bounce, if known
     while last < len(frames):
         f = int(frames[last])
         prev = int(frames[last - 1]) if last > k else start
         if f - prev > max_flight or _gap_between(seen, prev, f, gap):
             break
         last += 1
-        bounces = 0 if labels[last - 1] in hits else bounces + (labels[last - 1] == "ground")
+        if labels[last - 1] in hits:
+            bounces, half = 0, None
+        elif labels[last - 1] == "ground":
+            here = _bounce_half(land, sides, last - 1)
+            # two bounces in opposite halves: a hit between them was missed, this one starts the next shot
+            bounces = 1 if bounces and here is not None and half is not None and here != half else bounces + 1
+            half = here
         if bounces >= 2:
             return f, last  # the second bounce: the point is over
     last_f = int(frames[last - 1]) if last > k else start
@@ -214,6 +222,13 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
             end = t
             break
     return int(max(end, start)), last
+
+
+def _bounce_half(land: np.ndarray | None, sides: CourtSides | None, i: int) -> str | None:
+    """``near``/``far``: the half event ``i`` landed in, or None when no camera placed it."""
+    if land is None or sides is None or not np.isfinite(land[i]).all():
+        return None
+    return sides.side(float(land[i][1]))
 
 
 def _gap_between(seen: np.ndarray, a: int, b: int, gap: int) -> bool:

@@ -284,6 +284,28 @@ def test_point_ends_by_the_rules_where_bounces_land():
     assert rule_end(frames[:3], labels[:3], land[:3], 0, hits, sides) is None  # not over yet
 
 
+def test_bounces_in_opposite_halves_do_not_end_the_point():
+    """Two floor bounces after a hit end the point only in one half: placed by the camera in opposite
+    halves, a hit between them was missed (the padel sample's point was cut at its 7th event so)."""
+    from inference.court import load_court
+    from inference.events.rally import CourtSides, RallyParams, rally_end
+
+    fps, hits = 50.0, ("player_near", "player_far")
+    xy = np.tile([0.5, 0.5], (300, 1)) + np.linspace(0, 0.3, 300)[:, None]  # the ball always seen, moving
+    frames = np.array([10, 40, 90, 140])
+    labels = ["player_near", "ground", "ground", "ground"]  # the far and the near player's hits missed
+    sides = CourtSides.from_court(load_court("tennis"))
+    land = np.array([[5.0, 2.0], [5.0, 18.0], [5.0, 4.0], [5.0, 20.0]])  # near, far, near, far
+    params = RallyParams()
+    end, last = rally_end(xy, fps, 10, frames, labels, hits, 16 / 9, params, land, sides)
+    assert last == 4 and end == 140 + int(round(params.dead_s * fps))  # every event in the point
+    # without the camera the second bounce after the hit ends it, as before
+    assert rally_end(xy, fps, 10, frames, labels, hits, 16 / 9, params) == (90, 3)
+    same = land.copy()
+    same[2] = (5.0, 16.0)  # really two bounces in the far half: the point is over there
+    assert rally_end(xy, fps, 10, frames, labels, hits, 16 / 9, params, same, sides)[1] == 3
+
+
 def test_floor_positions_invert_the_camera():
     from training.events.simulate import simulate_clip
 
