@@ -2,9 +2,11 @@
 with σ 2–3 px noise by a camera at the side, oblique or behind — the shape of the short motion-capture
 trajectories that monocular methods are compared on. Prints the 3D error split along and across each
 frame's line of sight, and how many tracks were reconstructed, with the hit and the bounce as events and
-with the bounce alone (one event).
+with the bounce alone (one event), and — as `rally3d infer` has it from players.csv — with the hitter's
+court position (``--hitter SIGMA``: the body 0.4–1.1 m to one side of the ball and 0.2 m behind it, plus
+SIGMA m of noise per axis; :func:`training.synth.short_tracks.hitter_players`).
 
-    .venv/bin/python bench/bench_short_tracks.py [--tracks 30] [--seed 0]
+    .venv/bin/python bench/bench_short_tracks.py [--tracks 30] [--seed 0] [--hitter 0.3]
 
 The tracks are simulated by training/synth/short_tracks.py (tennis court and ball from
 conf/court/tennis.yaml): drag, Magnus with random topspin or slice, the rigid-ball impact (restitution and
@@ -28,7 +30,7 @@ from inference.court import load_court  # noqa: E402
 from inference.physics import FlightModel  # noqa: E402
 from inference.reconstruct import Observations  # noqa: E402
 from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
-from training.synth.short_tracks import FPS, simulate  # noqa: E402
+from training.synth.short_tracks import FPS, hitter_players, simulate  # noqa: E402
 
 SIZE = (1280, 720)
 #: (eye, target, horizontal field of view) of the three views
@@ -39,7 +41,7 @@ CAMERAS = {
 }
 
 
-def run(n: int, seed: int, noise: tuple[float, float]) -> None:
+def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = None) -> None:
     court = load_court("tennis")
     model = FlightModel.from_ball(court.ball)
     rng = np.random.default_rng(seed)
@@ -56,7 +58,8 @@ def run(n: int, seed: int, noise: tuple[float, float]) -> None:
     cfg = JointConfig(pixel_sigma=float(np.mean(noise)))
     for name, (eye, target, fov) in CAMERAS.items():
         cam = Camera.from_look_at(eye, target, SIZE, fov_deg=fov)
-        for events in ("hit + bounce", "bounce only"):
+        kinds = ("hit + bounce", "bounce only") + ((f"hit + bounce + hitter ±{hitter:g} m",) if hitter is not None else ())
+        for events in kinds:
             along, across, per_track, ok, frames, cpu = [], [], [], 0, 0, 0.0
             for k, tr in enumerate(tracks):
                 r2 = np.random.default_rng(seed * 1000 + k)
@@ -64,11 +67,14 @@ def run(n: int, seed: int, noise: tuple[float, float]) -> None:
                 uv = cam.project(tr["xyz"]) + r2.normal(0.0, sigma, (len(tr["xyz"]), 2))
                 inside = (uv[:, 0] >= 0) & (uv[:, 0] < SIZE[0]) & (uv[:, 1] >= 0) & (uv[:, 1] < SIZE[1])
                 uv[~inside] = np.nan
-                if events == "hit + bounce":
+                players = None
+                if events.startswith("hit"):
                     ev, lab = [tr["hit"], tr["bounce"]], ["player_near", "ground"]
+                    if "hitter" in events:
+                        players = hitter_players(np.random.default_rng(seed * 7777 + k), tr, hitter)
                 else:
                     ev, lab = [tr["bounce"]], ["ground"]
-                obs = Observations(court, cam, FPS, uv, np.array(ev), lab)
+                obs = Observations(court, cam, FPS, uv, np.array(ev), lab, players)
                 c0 = time.process_time()
                 fit = fit_joint(obs, cfg)
                 cpu += time.process_time() - c0
@@ -97,9 +103,11 @@ def main() -> None:
     ap.add_argument("--tracks", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--noise", default="2,3", help="2D noise σ range in px (default 2,3)")
+    ap.add_argument("--hitter", type=float, default=None,
+                    help="also fit with the hitter's court position from players.csv, this noisy (m per axis)")
     args = ap.parse_args()
     lo, hi = (float(x) for x in args.noise.split(","))
-    run(args.tracks, args.seed, (lo, hi))
+    run(args.tracks, args.seed, (lo, hi), args.hitter)
 
 
 if __name__ == "__main__":

@@ -4,12 +4,13 @@ on). Used by ``bench/bench_short_tracks.py`` and the short-track tests.
 
 Drag, Magnus with random topspin or slice (:func:`inference.physics.integrate`), the rigid-ball impact of the
 court's floor at the bounce (:func:`inference.physics.bounce`), then 3–8 frames; the first frame is a random
-phase after the hit.
+phase after the hit. :func:`hitter_players` gives the hitter's court position a players stage would write.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from inference.clipio import PlayerTracks
 from inference.court import Court
 from inference.physics import FlightModel, bounce, integrate
 
@@ -17,7 +18,8 @@ FPS = 25.0
 
 
 def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: float = FPS) -> dict | None:
-    """One hit → bounce → a few frames: positions at the frames (n, 3), the hit and bounce frames."""
+    """One hit → bounce → a few frames: positions at the frames (n, 3), the hit and bounce frames, the hit
+    point (3,)."""
     r = court.ball.radius
     floor = court.materials["floor"]
     hit = np.array([rng.uniform(1.5, 9.5), rng.uniform(-1.0, 3.0), rng.uniform(0.5, 1.6)])
@@ -57,4 +59,16 @@ def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: fl
         j = np.clip(np.round((since[~pre] - t_b) / dt).astype(int), 0, len(s2.t) - 1)
         pos[~pre] = s2.pos[j, 0]
     bounce_frame = int(np.round((t_b + t_hit) * fps))
-    return {"frames": frames, "xyz": pos, "bounce": bounce_frame, "hit": 0, "after": int(after)}
+    return {"frames": frames, "xyz": pos, "bounce": bounce_frame, "hit": 0, "after": int(after), "hit_xyz": hit}
+
+
+def hitter_players(rng: np.random.Generator, track: dict, sigma_m: float = 0.3,
+                   reach: tuple[float, float] = (0.4, 1.1), behind_m: float = 0.2) -> PlayerTracks:
+    """players.csv of the track's hitter at the hit frame, as a players stage would place them: the body
+    ``reach`` metres to one side of the ball at the hit (forehand or backhand, drawn), ``behind_m`` behind
+    it, plus Gaussian noise of ``sigma_m`` per axis; team ``near`` (the tracks are hit from the near side)."""
+    hit = track["hit_xyz"]
+    side = rng.choice([-1.0, 1.0]) * rng.uniform(*reach)
+    xy = np.array([hit[0] + side, hit[1] - behind_m]) + rng.normal(0.0, sigma_m, 2)
+    return PlayerTracks(np.array([track["hit"]]), np.array([0]), ["near"], np.array([1.0]), np.full((1, 4), np.nan),
+                        np.full((1, 17, 3), np.nan), xy[None])

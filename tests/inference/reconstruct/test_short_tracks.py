@@ -1,6 +1,6 @@
 """Short tracks with real ball physics (hit → bounce → a few frames, 25 fps, σ 2–3 px), simulated outside
-the rally generator: every track is reconstructed, with the hit and the bounce as events and with the
-bounce alone, and the error is small across the line of sight and bounded along it (the depth does not
+the rally generator: every track is reconstructed, with the hit and the bounce as events, with the
+bounce alone and with the hitter's court position (players.csv), and the error is small across the line of sight and bounded along it (the depth does not
 slide by metres)."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from inference.court import load_court
 from inference.physics import FlightModel
 from inference.reconstruct import Observations
 from inference.reconstruct.joint import JointConfig, fit_joint
-from training.synth.short_tracks import FPS, simulate
+from training.synth.short_tracks import FPS, hitter_players, simulate
 
 SIZE = (1280, 720)
 
@@ -30,7 +30,7 @@ def tracks():
     return court, out
 
 
-@pytest.mark.parametrize("events", ["hit + bounce", "bounce only"])
+@pytest.mark.parametrize("events", ["hit + bounce", "bounce only", "hit + bounce + hitter"])
 def test_every_short_track_is_reconstructed_from_behind(tracks, events):
     court, trs = tracks
     cam = Camera.from_look_at((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), SIZE, fov_deg=45.0)
@@ -39,9 +39,10 @@ def test_every_short_track_is_reconstructed_from_behind(tracks, events):
         rng = np.random.default_rng(k)
         uv = cam.project(tr["xyz"]) + rng.normal(0.0, rng.uniform(2.0, 3.0), (len(tr["xyz"]), 2))
         uv[~((uv >= 0) & (uv < SIZE)).all(axis=1)] = np.nan                     # outside the image
-        ev, lab = ([tr["hit"], tr["bounce"]], ["player_near", "ground"]) if events == "hit + bounce" else \
+        ev, lab = ([tr["hit"], tr["bounce"]], ["player_near", "ground"]) if events.startswith("hit") else \
             ([tr["bounce"]], ["ground"])
-        obs = Observations(court, cam, FPS, uv, np.array(ev), lab)
+        players = hitter_players(np.random.default_rng(100 + k), tr) if "hitter" in events else None
+        obs = Observations(court, cam, FPS, uv, np.array(ev), lab, players)
         b = fit_joint(obs, JointConfig(pixel_sigma=2.5)).ball_3d()
         seen = np.flatnonzero(np.isfinite(uv).all(axis=1))
         assert np.isin(seen, b.frame).all(), (k, events)                         # the whole track
