@@ -473,6 +473,14 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
     return fit
 
 
+def keeps_flight(failing: np.ndarray) -> bool:
+    """Whether a reported flight whose frames ``(n,)`` are flagged where a failing chain flight owns them is
+    kept without those frames: a failing neighbour that reaches a few frames into it (its contact fitted off
+    the event's frame) costs those frames only; the flight fails when they are most of it or leave < 2."""
+    failing = np.asarray(failing, bool)
+    return not failing.any() or (failing.mean() <= 0.5 and int((~failing).sum()) >= 2)
+
+
 def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: JointConfig
                   ) -> tuple[list[SegmentFit], FrameErrorModel | None]:
     """The reported flights from the fitted chain (frames, positions, covariances, contacts, checks), and the
@@ -504,13 +512,16 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             out.append(SegmentFit.failed(seg, "no 2D track beyond the event" if seg.index in (-1, E - 1)
                                          else "outside the fitted rally"))
             continue
-        owners = np.unique(own[m])
-        bad = [checks[s] for s in owners if not checks[s].ok]
+        failing = np.array([not checks[s].ok for s in own[m]])
+        if not keeps_flight(failing):
+            seg_frames = frames[m]
+            seg = replace(seg, start=int(seg_frames[0]), end=int(seg_frames[-1]))
+            out.append(SegmentFit.failed(seg, checks[int(own[m][failing][0])].reason))
+            continue
+        dropped = frames[m][failing]
+        m[np.flatnonzero(m)[failing]] = False
         seg_frames = frames[m]
         seg = replace(seg, start=int(seg_frames[0]), end=int(seg_frames[-1]))
-        if bad:
-            out.append(SegmentFit.failed(seg, bad[0].reason))
-            continue
         sig = np.sqrt(np.maximum(np.trace(cov[m], axis1=1, axis2=2), 0.0))
         if np.nanmedian(sig) > cfg.max_sigma_m:
             out.append(SegmentFit.failed(seg, f"too uncertain: median σ {np.nanmedian(sig):.1f} m (the track does "
@@ -547,6 +558,10 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             sf.figures["flags"] = flags
         if notes:
             sf.figures["refit"] = notes
+        if len(dropped):
+            why = checks[int(own[np.searchsorted(frames, dropped[0])])].reason
+            span = f"frame {dropped[0]}" if len(dropped) == 1 else f"{len(dropped)} frames ({dropped[0]}–{dropped[-1]})"
+            sf.figures["dropped_frames"] = f"{span} of a failing neighbour left out ({why})"
         out.append(sf)
     return out, em
 

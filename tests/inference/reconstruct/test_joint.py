@@ -144,3 +144,19 @@ def test_missing_camera_is_a_clear_error(tmp_path, capsys):
     shutil.copytree(SAMPLE / "padel_sample", clip_dir)
     assert main(["reconstruct", str(clip_dir)]) == 1
     assert "rally3d calibrate" in capsys.readouterr().err
+
+
+def test_a_failing_neighbour_costs_only_the_frames_it_reaches():
+    """A reported flight keeps its frames but those a failing chain flight owns (its contact fitted a few
+    frames off the event) unless they are most of it or leave fewer than two."""
+    from inference.reconstruct.joint import keeps_flight
+
+    assert keeps_flight(np.zeros(20, bool))
+    reach = np.zeros(20, bool)
+    reach[-3:] = True                                     # 3 frames of the next flight's failing fit
+    assert keeps_flight(reach)
+    assert not keeps_flight(np.ones(8, bool))             # the failing flight itself
+    most = np.zeros(8, bool)
+    most[:5] = True
+    assert not keeps_flight(most)
+    assert not keeps_flight(np.array([True, False]))      # one frame would be left
