@@ -1,7 +1,7 @@
 """Ball-only vs player-aware hit-event models, per class, with and without gaps at the contacts.
 
     .venv/bin/python bench/bench_events_players.py [--sport tennis] [--clips 60] [--fps 50]
-        [--weights shipped runs/hitnet_tennis_players.pth.tar ...] [--out FILE.md]
+        [--weights shipped runs/hitnet_tennis_players.pth.tar ...] [--bridge-too] [--out FILE.md]
 
 Held-out simulated rallies (seed 6161, never used for training or tuning) with their articulated players
 (they swing at their hits) seen through pose-backend noise (``training.events.pose_noise``: misses, the far
@@ -82,10 +82,12 @@ def main(argv=None) -> None:
         det = EventDetector.from_checkpoint(None if w == "shipped" else w, sport=args.sport)
         name = "shipped" if w == "shipped" else Path(w).name
         if det.wants_players:
-            rows += [(f"{name} (player-aware, with players)", det, players),
-                     (f"{name} (player-aware, no players)", det, no_players)]
+            rows += [(f"{name} (player-aware, with players)", det, players, False),
+                     (f"{name} (player-aware, no players)", det, no_players, False)]
         else:
-            rows.append((f"{name} (ball only)", det, no_players))
+            rows.append((f"{name} (ball only)", det, no_players, False))
+    if args.bridge_too:
+        rows += [(f"{name}, gap bridging", det, pl, True) for name, det, pl, _ in rows]
     cs = rows[0][1].class_set
     n_found = sum(p is not None and len(p) > 0 for p in players)
     lines = [f"{args.sport}, {source}; every event kept, ±2 frames at 50 fps (scaled); {n_found} clips with players",
@@ -93,8 +95,8 @@ def main(argv=None) -> None:
     for cond, kw in CONDITIONS.items():
         tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig(**kw))
         lines += [f"**{cond}**", "", "| model | all | " + " | ".join(cs.classes[1:]) + " |", "|---|" + "---|" * cs.n]
-        for name, det, pl in rows:
-            s = event_counts(det, clips, tracks, pl).scores
+        for name, det, pl, bridge in rows:
+            s = event_counts(det, clips, tracks, pl, bridge_gaps=bridge).scores
             f1 = [s()["f1"]] + [s(i)["f1"] for i in range(1, cs.n)]
             lines.append(f"| {name} | " + " | ".join(f"{v:.3f}" for v in f1) + " |")
             print(lines[-1], flush=True)

@@ -68,7 +68,8 @@ class EventResult:
         outside: events judged outside the point (warm-up bounces, the ball after it); ``events`` holds
             them too unless ``predict(..., keep_all=False)``.
         uncertainty: ``(N,)`` per event of ``events``, frames: the uncertainty of a racket hit timed from the
-            flights on both sides of a gap in the track (:mod:`.gaps`); NaN where the model's timing stands.
+            flights on both sides of a gap in the track (``predict(..., bridge_gaps=True)``, :mod:`.gaps`); NaN
+            where the model's timing stands (always, by default).
     """
 
     events: HitEvents
@@ -233,7 +234,7 @@ class EventDetector:
 
     def predict(self, ball: BallTrack, fps: float, width: int, height: int, camera=None,
                 players: PlayerTracks | None = None, frames=None, *, n_frames: int | None = None,
-                keep_all: bool = True, rally: RallyParams | None = None, bridge_gaps: bool = True) -> EventResult:
+                keep_all: bool = True, rally: RallyParams | None = None, bridge_gaps: bool = False) -> EventResult:
         """Events of one clip.
 
         Args:
@@ -248,6 +249,8 @@ class EventDetector:
                 leaves them out. Either way ``outside`` lists them.
             rally: segmentation constants (default: the sport's).
             bridge_gaps: time racket hits inside the track's gaps from the flights on both sides (:mod:`.gaps`).
+                Off by default: on tracks with gaps at the contacts the models' own timing is better
+                (docs/events.md, "Contacts in the tracker's gaps").
         """
         if not fps or fps <= 0 or not np.isfinite(fps):
             raise ValueError(f"fps must be a positive number, got {fps}")

@@ -33,6 +33,26 @@ def test_shipped_padel_default_finds_events_on_held_out_clips(clips):
     assert counts.scores()["f1"] > 0.6, counts.scores()
 
 
+def test_hits_in_gaps_keep_the_models_timing_unless_bridging_is_asked(clips):
+    """Racket hits hidden by the tracker: by default the model's own frame stands (no uncertainty given);
+    ``bridge_gaps=True`` times them from the flights on both sides of the gap and says how sure it is."""
+    det = EventDetector.from_checkpoint(None, sport="padel")
+    moved = 0
+    for c in clips:
+        vis = c.ball.visibility.copy()
+        for f, e in zip(c.events.frame, c.events.event):
+            if e.startswith("player"):
+                vis[max(f - 3, 0):f + 4] = 0  # the body hides the ball around each hit
+        track = BallTrack(c.ball.frame, vis, np.where(vis[:, None] > 0, c.ball.xy, np.nan))
+        plain = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)
+        bridged = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames,
+                              bridge_gaps=True)
+        assert np.isnan(plain.uncertainty).all()
+        assert np.array_equal(plain.probs, bridged.probs)
+        moved += int(np.isfinite(bridged.uncertainty).sum())
+    assert moved > 0
+
+
 def test_shipped_tennis_default_loads():
     det = EventDetector.from_checkpoint(None, sport="tennis")
     assert det.class_set.classes == ("none", "ground", "player_near", "player_far")
