@@ -92,7 +92,7 @@ class RallyParams:
     peak_prob: float = 0.3
     refine_s: float = 0.04
     serve_window_s: float = 1.2
-    snap_s: float = 0.15
+    snap_s: float = 0.2
     serve_bounce: bool = False
     serve_bounce_s: float = 1.2
     gap_s: float = 1.0
