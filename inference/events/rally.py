@@ -594,8 +594,9 @@ def rally_summary(seg: RallySegment, fps: float, outside_labels, kept: bool) -> 
     for e in outside_labels:
         counts[str(e)] = counts.get(str(e), 0) + 1
     out = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+    n = sum(counts.values())
     return (f"rally frames {seg.start}–{seg.end} ({seg.start / fps:.2f}–{seg.end / fps:.2f} s, serve from "
-            f"{seg.serve_source}); {sum(counts.values())} events outside the point" + (f" ({out})" if out else "")
+            f"{seg.serve_source}); {n} event{'' if n == 1 else 's'} outside the point" + (f" ({out})" if out else "")
             + (", kept in events.csv (--rally-only leaves them out)" if kept and counts else
                ", left out of events.csv" if counts else ""))
 

