@@ -260,8 +260,14 @@ class ClientView:
 
     @property
     def camera_fitted(self) -> bool:
-        """True once the browser has reported its camera at the last fitted pose."""
-        return not self._fit_pending
+        """True once the browser has reported its camera at the last fitted pose (also when a second fit to the
+        same pose, from another thread, left nothing for the browser to move and so nothing to report)."""
+        return not self._fit_pending or self._at_fit(self.reported_camera)
+
+    def _at_fit(self, position) -> bool:
+        """Whether a reported camera position (3,) is the fitted pose."""
+        d = self.fit_distance or 0.0
+        return position is not None and d > 0 and bool(np.allclose(position, (0.0, 0.0, -d), atol=1e-3 * d))
 
     def _on_camera(self, camera) -> None:
         """The browser reported its camera (viser calls this for client messages only).
@@ -273,8 +279,7 @@ class ClientView:
         self.reported_camera = np.array(camera.position, float)
         with self._fit_lock:
             aspect = float(camera.aspect or 0.0)
-            d = self.fit_distance or 0.0
-            at_fit = d > 0 and bool(np.allclose(self.reported_camera, (0.0, 0.0, -d), atol=1e-3 * d))
+            at_fit = self._at_fit(self.reported_camera)
             if aspect > 0 and abs(aspect - self._aspect) > 1e-3:  # canvas resized (or first real size): refit
                 self.fit(aspect)
             elif self._fit_pending and not at_fit:

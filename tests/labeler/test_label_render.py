@@ -109,3 +109,35 @@ def test_no_event_model_gives_a_clear_message(tmp_path, monkeypatch):
     s = LabelSession(copy_sample(tmp_path / "c"), autosave=False)
     with pytest.raises(RuntimeError, match="no hit-event model available"):
         propose_events(s)
+
+
+def test_a_second_fit_to_the_same_pose_does_not_wait_for_a_report(monkeypatch):
+    """Two fits of one tab (at connection and after the canvas's first size, two threads) to the same pose:
+    the browser, already there, reports nothing new, and the view must still count as fitted; a report of
+    another pose (the browser resetting as it starts) is still answered by a refit."""
+    import threading
+    from types import SimpleNamespace
+
+    import labeler.app as app_mod
+
+    fits = []
+    monkeypatch.setattr(app_mod, "fit_camera", lambda client, plane, aspect: fits.append(aspect) or 1.7)
+    view = app_mod.ClientView.__new__(app_mod.ClientView)  # the camera logic alone, without a browser
+    view.client = SimpleNamespace(camera=SimpleNamespace(aspect=1.5))
+    view.plane, view.fit_distance, view.reported_camera = None, None, None
+    view._aspect, view._fit_lock, view._fit_pending = 0.0, threading.RLock(), True
+
+    def report(position, aspect=1.5):
+        view._on_camera(SimpleNamespace(position=position, aspect=aspect))
+
+    assert not view.camera_fitted
+    report((0.3, 0.1, -2.5))               # the browser's first report: the canvas size → the first fit
+    assert fits == [1.5] and not view.camera_fitted
+    report((0.0, 0.0, -1.7))               # at the fitted pose
+    assert view.camera_fitted
+    view.fit(1.5)                          # the other thread's fit, to the same pose: no report will follow
+    assert view.camera_fitted
+    report((0.0, 0.0, -3.0))               # the browser reset to its initial camera: refit, not fitted
+    assert fits == [1.5, 1.5, 1.5] and not view.camera_fitted
+    report((0.0, 0.0, -1.7))
+    assert view.camera_fitted
