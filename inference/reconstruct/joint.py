@@ -513,10 +513,11 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
                                          else "outside the fitted rally"))
             continue
         failing = np.array([not checks[s].ok for s in own[m]])
+        why = checks[int(own[m][failing][0])].reason if failing.any() else ""
         if not keeps_flight(failing):
             seg_frames = frames[m]
             seg = replace(seg, start=int(seg_frames[0]), end=int(seg_frames[-1]))
-            out.append(SegmentFit.failed(seg, checks[int(own[m][failing][0])].reason))
+            out.append(SegmentFit.failed(seg, why))
             continue
         dropped = frames[m][failing]
         m[np.flatnonzero(m)[failing]] = False
@@ -559,7 +560,6 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
         if notes:
             sf.figures["refit"] = notes
         if len(dropped):
-            why = checks[int(own[np.searchsorted(frames, dropped[0])])].reason
             span = f"frame {dropped[0]}" if len(dropped) == 1 else f"{len(dropped)} frames ({dropped[0]}–{dropped[-1]})"
             sf.figures["dropped_frames"] = f"{span} of a failing neighbour left out ({why})"
         out.append(sf)
