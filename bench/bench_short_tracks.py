@@ -3,15 +3,15 @@ with σ 2–3 px noise by a camera at the side, oblique or behind — the shape 
 trajectories that monocular methods are compared on. Prints the 3D error split along and across each
 frame's line of sight, and how many tracks were reconstructed, with the hit and the bounce as events and
 with the bounce alone (one event), and — as `rally3d infer` has it from players.csv — with the hitter's
-court position (``--hitter SIGMA``: the body 0.4–1.1 m to one side of the ball and 0.2 m behind it, plus
+court position (``--hitter SIGMA``: the body 0.4–1.1 m (table tennis 0.2–0.7 m) to one side of the ball and 0.2 m behind it, plus
 SIGMA m of noise per axis; :func:`training.synth.short_tracks.hitter_players`).
 
-    .venv/bin/python bench/bench_short_tracks.py [--tracks 30] [--seed 0] [--hitter 0.3]
+    .venv/bin/python bench/bench_short_tracks.py [--sport tennis|table_tennis] [--tracks 30] [--seed 0] [--hitter 0.3]
 
-The tracks are simulated by training/synth/short_tracks.py (tennis court and ball from
-conf/court/tennis.yaml): drag, Magnus with random topspin or slice, the rigid-ball impact (restitution and
-friction of the court's floor) at the bounce, then 3–8 frames; the first frame is a random phase after the
-hit. They are not made by `rally3d synth` and the reconstruction knows only the court YAML, the camera, the
+The tracks are simulated by training/synth/short_tracks.py (court and ball from conf/court/<sport>.yaml; the
+motion-capture tracks of the literature are table tennis, tennis is the same shape at ten times the scale):
+drag, Magnus with random topspin or slice, the rigid-ball impact (restitution and friction of the playing
+surface) at the bounce, then 3–8 frames; the first frame is a random phase after the hit. They are not made by `rally3d synth` and the reconstruction knows only the court YAML, the camera, the
 2D track and the events.
 """
 from __future__ import annotations
@@ -33,16 +33,27 @@ from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
 from training.synth.short_tracks import FPS, hitter_players, simulate  # noqa: E402
 
 SIZE = (1280, 720)
-#: (eye, target, horizontal field of view) of the three views
+#: (eye, target, horizontal field of view) of the three views of each sport
 CAMERAS = {
-    "side": ((-14.0, 11.9, 5.0), (5.5, 11.9, 0.0), 75.0),
-    "oblique": ((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), 60.0),
-    "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
+    "tennis": {
+        "side": ((-14.0, 11.9, 5.0), (5.5, 11.9, 0.0), 75.0),
+        "oblique": ((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), 60.0),
+        "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
+    },
+    # the table (1.525 x 2.74 m, top 0.76 m) seen from 3-4 m, as the motion-capture rooms film it
+    "table_tennis": {
+        "side": ((-4.0, 1.0, 1.8), (0.76, 1.0, 0.76), 65.0),
+        "oblique": ((-2.6, -2.0, 2.2), (0.76, 1.2, 0.76), 60.0),
+        "behind": ((0.76, -3.4, 2.0), (0.76, 1.6, 0.76), 50.0),
+    },
 }
 
+#: how far beside the ball the hitter's body is drawn (m): a tennis player reaches farther than a table-tennis one
+REACH = {"tennis": (0.4, 1.1), "table_tennis": (0.2, 0.7)}
 
-def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = None) -> None:
-    court = load_court("tennis")
+
+def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = None, sport: str = "tennis") -> None:
+    court = load_court(sport)
     model = FlightModel.from_ball(court.ball)
     rng = np.random.default_rng(seed)
     tracks = []
@@ -50,13 +61,13 @@ def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = No
         tr = simulate(rng, court, model)
         if tr is not None:
             tracks.append(tr)
-    print(f"{n} simulated tracks (tennis ball and court), 25 fps, hit → bounce → 3–8 frames, "
+    print(f"{n} simulated tracks ({sport.replace('_', ' ')} ball and court), 25 fps, hit → bounce → 3–8 frames, "
           f"{np.mean([len(t['frames']) for t in tracks]):.0f} frames on average, noise σ ∈ {noise} px\n")
     print("| camera | events | reconstructed | along-ray median m | along mean m | across median m | "
           "3D median m | 3D mean per track m | frames/CPU-s |")
     print("|---|---|---|---|---|---|---|---|---|")
     cfg = JointConfig(pixel_sigma=float(np.mean(noise)))
-    for name, (eye, target, fov) in CAMERAS.items():
+    for name, (eye, target, fov) in CAMERAS[sport].items():
         cam = Camera.from_look_at(eye, target, SIZE, fov_deg=fov)
         kinds = ("hit + bounce", "bounce only") + ((f"hit + bounce + hitter ±{hitter:g} m",) if hitter is not None else ())
         for events in kinds:
@@ -71,7 +82,7 @@ def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = No
                 if events.startswith("hit"):
                     ev, lab = [tr["hit"], tr["bounce"]], ["player_near", "ground"]
                     if "hitter" in events:
-                        players = hitter_players(np.random.default_rng(seed * 7777 + k), tr, hitter)
+                        players = hitter_players(np.random.default_rng(seed * 7777 + k), tr, hitter, REACH[sport])
                 else:
                     ev, lab = [tr["bounce"]], ["ground"]
                 obs = Observations(court, cam, FPS, uv, np.array(ev), lab, players)
@@ -105,9 +116,11 @@ def main() -> None:
     ap.add_argument("--noise", default="2,3", help="2D noise σ range in px (default 2,3)")
     ap.add_argument("--hitter", type=float, default=None,
                     help="also fit with the hitter's court position from players.csv, this noisy (m per axis)")
+    ap.add_argument("--sport", choices=sorted(CAMERAS), default="tennis",
+                    help="court, ball, shots and cameras (conf/court/<sport>.yaml; default tennis)")
     args = ap.parse_args()
     lo, hi = (float(x) for x in args.noise.split(","))
-    run(args.tracks, args.seed, (lo, hi), args.hitter)
+    run(args.tracks, args.seed, (lo, hi), args.hitter, args.sport)
 
 
 if __name__ == "__main__":

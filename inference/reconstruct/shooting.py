@@ -135,6 +135,7 @@ class ShootingConfig:
     court_sigma: float = 0.01         # m, hinge on a frame below the floor or through a wall
     net_sigma: float = 0.02           # m
     limit_sigma: float = 0.05         # m, hinge of the hit-height range
+    reseed_sigmas: float = 5.0         # a run-out this many σ off its bounce's rebound restarts from the rebound
     free_end_speed_sigma: float = 8.0  # m/s, Student-t pull towards rest of a free end's velocity or of a
     #                                    flight leaving the net/a mesh (its motion along the ray is unseen)
     fit_spin: bool = True
@@ -841,6 +842,41 @@ class Problem:
             rho, d = student_t(theta[idx] / sig, self.hit_prior.dof)
             rows.add(rho, lambda d=d, idx=idx: [(idx[None, :].repeat(3, 0), np.diag(d / sig))])
 
+    def seed_runouts(self, theta: np.ndarray, fl: Flights) -> np.ndarray | None:
+        """θ with each run-out that leaves a floor/glass bounce more than ``reseed_sigmas`` σ off the impact
+        model's rebound of its incoming flight restarted from that rebound, when that costs less with the physics on than θ as it is (None: no change).
+        Without the impact model (the first pass) a run-out's depth is pinned by its 2D track alone, and seen
+        from behind a ball moving away fits as well as one coming back towards the camera; LM does not leave
+        that basin once the impact model joins."""
+        ch = self.chain
+        taus = self.taus(theta)
+        cand = theta.copy()
+        changed = False
+        for c, ct in enumerate(ch.contacts):
+            if ct.material is None or ct.normal is None:
+                continue
+            out = [f for f in ch.flights if f.start == c and f.end is None and not f.lead_in]
+            inc = self._incoming(theta, fl, taus, c)
+            if not out or inc is None or inc[1] @ ct.normal > -0.3:
+                continue
+            vo, wo = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
+                            ct.material.friction, self.obs.court.ball.radius)
+            dv = theta[out[0].vel] - vo[0]
+            vn = abs(float(inc[1] @ ct.normal))
+            s_n = self.cfg.bounce_sigma_normal * vn + self.cfg.bounce_sigma_floor
+            s_t = self.cfg.bounce_sigma_tangent * float(np.linalg.norm(inc[1])) + self.cfg.bounce_sigma_floor
+            dn = float(dv @ ct.normal)
+            if np.hypot(dn / s_n, np.linalg.norm(dv - dn * ct.normal) / s_t) < self.cfg.reseed_sigmas:
+                continue                   # the run-out is about what the impact model says: leave it
+            cand[out[0].vel] = vo[0]
+            if out[0].spin is not None:
+                cand[out[0].spin] = wo[0]
+            changed = True
+        if not changed:
+            return None
+        costs = [float(np.sum(self.assemble(t, jac=False)[0].residuals() ** 2)) for t in (theta, cand)]
+        return cand if costs[1] < costs[0] else None
+
     def reweight(self) -> None:
         """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
         k = self.cfg.huber_k
@@ -908,7 +944,11 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     sol = lm(problem, problem.clamp(theta), max_iter or cfg.max_iter)
     problem.physics = True
     n = sol.iterations
-    sol = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
+    seeded = problem.seed_runouts(sol.theta, sol.aux["flights"])
+    if seeded is None:
+        sol = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
+    else:
+        sol = lm(problem, seeded, max_iter or cfg.max_iter)
     sol.iterations += n
     for _ in range(cfg.irls_passes - 1):
         problem.reweight()

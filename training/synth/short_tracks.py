@@ -3,10 +3,14 @@ few frames after it (the shape of the short motion-capture trajectories that mon
 on). Used by ``bench/bench_short_tracks.py`` and the short-track tests.
 
 Drag, Magnus with random topspin or slice (:func:`inference.physics.integrate`), the rigid-ball impact of the
-court's floor at the bounce (:func:`inference.physics.bounce`), then 3–8 frames; the first frame is a random
-phase after the hit. :func:`hitter_players` gives the hitter's court position a players stage would write.
+court's playing surface at the bounce (:func:`inference.physics.bounce`), then 3–8 frames; the first frame is a
+random phase after the hit. The shots of each sport are a :class:`Shots` of :data:`SHOTS` (tennis from behind
+the near baseline into the far half; table tennis from behind the near end of the table onto the far half of
+it). :func:`hitter_players` gives the hitter's court position a players stage would write.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -16,35 +20,90 @@ from inference.physics import FlightModel, bounce, integrate
 
 FPS = 25.0
 
+Range = tuple[float, float]
 
-def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: float = FPS) -> dict | None:
-    """One hit → bounce → a few frames: positions at the frames (n, 3), the hit and bounce frames, the hit
-    point (3,)."""
+
+@dataclass(frozen=True)
+class Shots:
+    """The shots drawn for one sport (metres, m/s, degrees, rad/s; the court frame of the court YAML).
+
+    Attributes:
+        hit: (x, y, z) ranges of the hit point.
+        aim: (x, y) ranges of the point aimed at on the playing surface (sets the direction only).
+        speed, elevation: launch speed and angle above the horizontal.
+        spin: signed spin about the horizontal axis across the shot (negative: topspin).
+        surface: the playing surface's material and height: the ball bounces where its centre comes down
+            to ``surface_z`` + radius.
+        net_top: height the ball's centre must clear at the net (its radius and a margin added).
+        land_x, land_y: where the bounce must be (a shot landing elsewhere is drawn again).
+        duration: seconds of flight simulated to find the bounce.
+    """
+
+    hit: tuple[Range, Range, Range]
+    aim: tuple[Range, Range]
+    speed: Range
+    elevation: Range
+    spin: Range
+    surface: str
+    surface_z: float
+    net_top: float
+    land_x: Range
+    land_y: Range
+    duration: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "elevation", "spin", "land_x", "land_y"):
+            lo, hi = getattr(self, name)
+            if not lo <= hi:
+                raise ValueError(f"Shots.{name} must be (low, high) with low <= high, got {(lo, hi)}")
+
+
+#: The shots of each court's sport
+SHOTS: dict[str, Shots] = {
+    "tennis": Shots(hit=((1.5, 9.5), (-1.0, 3.0), (0.5, 1.6)), aim=((1.5, 9.5), (15.0, 22.5)), speed=(15.0, 32.0),
+                    elevation=(2.0, 14.0), spin=(-250.0, 150.0), surface="floor", surface_z=0.0, net_top=0.914,
+                    land_x=(-np.inf, np.inf), land_y=(-np.inf, 23.77 + 2.0)),
+    # drives, loops and pushes from 0.2-1 m behind the end line, 5-16 m/s, up to about 95 rev/s of topspin
+    "table_tennis": Shots(hit=((0.1, 1.425), (-0.8, -0.2), (0.8, 1.15)), aim=((0.3, 1.225), (1.8, 2.5)),
+                          speed=(6.0, 14.0), elevation=(3.0, 20.0), spin=(-500.0, 250.0), surface="table",
+                          surface_z=0.76, net_top=0.76 + 0.1525, land_x=(0.0, 1.525), land_y=(1.37, 2.74),
+                          duration=1.0),
+}
+
+
+def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: float = FPS,
+             shots: Shots | None = None) -> dict | None:
+    """One hit → bounce → a few frames, or None when the drawn shot fails (into the net, off the surface):
+    positions at the frames (n, 3), the hit and bounce frames, the hit point (3,). ``shots`` defaults to
+    ``SHOTS[court.sport]``."""
+    sh = shots or SHOTS[court.sport]
     r = court.ball.radius
-    floor = court.materials["floor"]
-    hit = np.array([rng.uniform(1.5, 9.5), rng.uniform(-1.0, 3.0), rng.uniform(0.5, 1.6)])
-    land = np.array([rng.uniform(1.5, 9.5), rng.uniform(15.0, 22.5)])
-    speed = rng.uniform(15.0, 32.0)
+    mat = court.materials[sh.surface]
+    hit = np.array([rng.uniform(*sh.hit[0]), rng.uniform(*sh.hit[1]), rng.uniform(*sh.hit[2])])
+    land = np.array([rng.uniform(*sh.aim[0]), rng.uniform(*sh.aim[1])])
+    speed = rng.uniform(*sh.speed)
     d = np.r_[land - hit[:2], 0.0]
     d /= np.linalg.norm(d)
-    elev = np.radians(rng.uniform(2.0, 14.0))
+    elev = np.radians(rng.uniform(*sh.elevation))
     vel = speed * np.r_[np.cos(elev) * d[:2], np.sin(elev)]
-    spin = np.cross([0.0, 0.0, 1.0], d) * rng.uniform(-250.0, 150.0)   # topspin (<0 here) or slice
+    spin = np.cross([0.0, 0.0, 1.0], d) * rng.uniform(*sh.spin)   # topspin (<0 here) or slice
     dt = 1.0 / 1000.0
-    s = integrate(hit, vel, spin, 3.0, model, dt=dt)
+    s = integrate(hit, vel, spin, sh.duration, model, dt=dt)
     z = s.pos[:, 0, 2]
-    below = np.flatnonzero(z <= r)
+    below = np.flatnonzero(z <= sh.surface_z + r)
     if not len(below):
         return None
     k = int(below[0])
     net = np.flatnonzero((s.pos[:k, 0, 1] >= court.net_y))
-    if not len(net) or s.pos[net[0], 0, 2] < 0.914 + 3 * r or s.pos[k, 0, 1] > court.size[1] + 2:
-        return None                                          # into the net or far out: not a rally shot
+    x_b, y_b = s.pos[k, 0, :2]
+    if (not len(net) or s.pos[net[0], 0, 2] < sh.net_top + 3 * r
+            or not sh.land_x[0] <= x_b <= sh.land_x[1] or not sh.land_y[0] <= y_b <= sh.land_y[1]):
+        return None                                          # into the net or off the surface: not a rally shot
     t_b = s.t[k]
     up = np.array([0.0, 0.0, 1.0])
-    v_out, w_out = bounce(s.vel[k], s.spin[k], up, floor.restitution, floor.friction, r)
+    v_out, w_out = bounce(s.vel[k], s.spin[k], up, mat.restitution, mat.friction, r)
     p_b = s.pos[k, 0].copy()
-    p_b[2] = r
+    p_b[2] = sh.surface_z + r
     after = rng.integers(3, 9)
     t_hit = -rng.uniform(0.0, 1.0 / fps)                    # the hit between frames −1 and 0 (seconds)
     last = int(np.floor((t_b + t_hit) * fps)) + int(after)
