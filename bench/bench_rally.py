@@ -3,7 +3,7 @@ the point (``simulate_clips(..., around=True)``): serve frame within ±3 frames,
 event F1 of the rally's events with and without the segmentation (the shipped model of the sport).
 
     .venv/bin/python bench/bench_rally.py [--sport padel] [--clips 100] [--track annotated|degraded]
-        [--fps 25] [--seed 8] [--plain] [--why]
+        [--fps 25] [--seed 8] [--plain] [--players] [--why]
 
 Prints the figures and the CPU time; the clips are held out from training (their own seed).
 """
@@ -14,6 +14,10 @@ import time
 
 import numpy as np
 import torch
+
+
+#: pose noise measured on MoveNet and the players stage (docs/events.md#pose-noise-measured)
+MEASURED_POSE_NOISE = "conf/data/pose_noise/movenet_measured.yaml"
 
 
 def print_why(c, res) -> None:
@@ -48,20 +52,32 @@ def main(argv=None) -> dict:
     ap.add_argument("--cache", default="runs/events_cache")
     ap.add_argument("--plain", action="store_true", help="rallies without warm-up bounces or the ball after the point "
                     "(the standard clips: does the segmentation cost their events?)")
+    ap.add_argument("--players", action="store_true",
+                    help="as `rally3d infer` with players found: the player-aware model (hitnet_<sport>_players) "
+                    "with the rallies' players seen through the pose noise measured on MoveNet")
     ap.add_argument("--why", action="store_true", help="print each rally whose serve or end is missed, and why")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     t0 = time.process_time()
     clips = simulate_clips(args.sport, args.clips, 7000 + args.seed, args.cache, progress=False,
-                           around=not args.plain, fps=args.fps)
+                           around=not args.plain, fps=args.fps, players=args.players)
     tracks = [c.ball for c in clips] if args.track == "annotated" else degrade_all(
         clips, args.seed, DegradeConfig(p_clean=0.0))
-    det = EventDetector.from_checkpoint(args.weights, sport=args.sport)
+    players = [None] * len(clips)
+    weights = args.weights
+    if args.players:
+        from inference.events.detector import WEIGHTS_DIR
+        from training.events.pose_noise import PoseNoiseConfig, noisy_all
+
+        players = noisy_all(clips, 17, PoseNoiseConfig.from_file(MEASURED_POSE_NOISE))
+        weights = weights or str(WEIGHTS_DIR / f"hitnet_{args.sport}_players.pth.tar")
+    det = EventDetector.from_checkpoint(weights, sport=args.sport)
     cs = det.class_set
     d_start, d_end, sources = [], [], {}
     counts = {k: EventCounts(cs.classes) for k in ("rally", "all")}
-    for c, tr in zip(clips, tracks):
-        res = det.predict(tr, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True)
+    for c, tr, pl in zip(clips, tracks, players):
+        res = det.predict(tr, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames, keep_all=True,
+                          players=pl)
         seg = res.rally
         if args.why:
             print_why(c, res)
@@ -85,8 +101,9 @@ def main(argv=None) -> dict:
     }
     fps = f"{args.fps:g} fps" if args.fps else "25–60 fps"
     kind = "without" if args.plain else "with"
+    model = "player-aware model, players through the measured pose noise" if args.players else "ball-only model"
     print(f"\n{args.sport}, {len(clips)} simulated rallies {kind} pre-serve bounces and the ball after the point, "
-          f"{args.track} track, {fps}")
+          f"{args.track} track, {fps}, {model}")
     print(f"serve frame within ±3 frames: {out['serve_within_3']:.1%} (median |error| "
           f"{out['serve_median_abs_frames']:.1f} frames; serve from {sources})")
     print(f"end within ±0.3 s: {out['end_within_0.3s']:.1%} (median |error| {out['end_median_abs_s']:.2f} s)")

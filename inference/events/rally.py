@@ -11,7 +11,9 @@ bounce in the hand comes back, a serve does not), or out of the box of the serve
 bounces (:func:`box_exit`: a far padel serve is slow in the image but leaves that box). Of the passing
 candidates within ``serve_window_s`` of the first, the one the ball leaves fastest; when one was picked
 at the start of a toss or a rebound that rises and falls at one image x, the launch after its top is the
-serve (:func:`after_toss`). Sports whose serve bounces first (padel) keep that bounce in the point.
+serve (:func:`after_toss`). On a poor track (a tracker's misses and wrong positions) these tests can pass a
+late candidate and skip the rally's first hits: when the decoded hits hold a run of alternating sides
+(:func:`chain_serve`) and the track's serve comes after the run's second hit, the run's first hit is the serve. Sports whose serve bounces first (padel) keep that bounce in the point.
 
 The end: with a camera, by the rules where the bounces land on the court (:func:`rule_end`: after a hit
 the ball must first land in the other half, inside the lines; the net, a wall first, out, or a second
@@ -61,6 +63,10 @@ class RallyParams:
             launch frame is looked for this close to it.
         serve_window_s: passing candidates this close to the first compete (the fastest wins).
         snap_s: a decoded racket hit this close to the serve's frame gives its frame.
+        chain_hits: the first hit of the first run of this many decoded hits by alternating sides
+            (:func:`chain_serve`) is the serve when the track's serve comes after the run's second hit (less
+            ``snap_s``) or the track gives none (0: off). A track serve between the two is kept: a decoded
+            serve is often early (the toss), the track times it.
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
         gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
         dead_s: the ball is dead this long after the last event when the track goes on.
@@ -93,6 +99,7 @@ class RallyParams:
     refine_s: float = 0.04
     serve_window_s: float = 1.2
     snap_s: float = 0.2
+    chain_hits: int = 3
     serve_bounce: bool = False
     serve_bounce_s: float = 1.2
     gap_s: float = 1.0
@@ -123,7 +130,8 @@ class RallySegment:
         start: the serve's frame; end: the frame where the ball is dead (``start <= end``).
         inside: ``(N,)`` bool per event given, True for the rally's events.
         serve_source: ``hit`` (a decoded racket hit), ``model`` (a peak of the hit probability the decoder
-            dropped), ``track`` (the track's turn) or ``none``.
+            dropped), ``track`` (the track's turn), ``chain`` (the first of the decoded hits' alternating run,
+            :func:`chain_serve`) or ``none``.
     """
 
     start: int
@@ -551,6 +559,25 @@ def find_serve(xy: np.ndarray, fps: float, hit_frames: np.ndarray, aspect: float
     return int(u), source
 
 
+def chain_serve(frames: np.ndarray, labels: list[str], hits, fps: float, params: RallyParams) -> tuple[int, int] | None:
+    """The frames of the first two racket hits of the first run of ``chain_hits`` or more hits by alternating
+    sides (near, far, near, …), each within ``max_flight_s`` of the one before: the decoded events' own
+    account of where the rally starts (the server's bounces and catches before it are one side's, the
+    point's hits alternate). None when no such run exists or ``chain_hits`` is 0."""
+    if params.chain_hits <= 0:
+        return None
+    idx = [i for i, c in enumerate(labels) if c in hits]
+    limit = params.max_flight_s * fps
+    run = []
+    for i in idx:
+        if run and (labels[i] == labels[run[-1]] or frames[i] - frames[run[-1]] > limit):
+            run = []
+        run.append(i)
+        if len(run) >= params.chain_hits:
+            return int(frames[run[0]]), int(frames[run[1]])
+    return None
+
+
 def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=("player_near", "player_far"),
                   aspect: float = 16 / 9, params: RallyParams | None = None,
                   hit_prob: np.ndarray | None = None, camera=None, sides: CourtSides | None = None) -> RallySegment:
@@ -573,6 +600,9 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     T = len(xy)
     hit_frames = np.array([f for f, c in zip(frames, labels) if c in hits], np.int64)
     start, source = find_serve(xy, fps, hit_frames, aspect, params, hit_prob)
+    chained = chain_serve(frames, labels, hits, fps, params)
+    if chained is not None and (start is None or start > chained[1] - params.snap_s * fps):
+        start, source = chained[0], "chain"   # the track's serve comes after a hit that answered the chain's first
     if start is None:
         start = int(hit_frames[0]) if len(hit_frames) else (int(frames[0]) if len(frames) else 0)
         source = "hit" if len(hit_frames) else "none"

@@ -331,3 +331,28 @@ def test_rally_summary_reports_the_events_outside_the_point():
     one = rally_summary(seg, 50.0, ["ground"], kept=False)
     assert "left out of events.csv" in one and "1 event outside the point" in one
     assert "0 events outside" in rally_summary(seg, 50.0, [], kept=True)
+
+
+def test_a_track_serve_after_the_rallys_alternating_hits_gives_way_to_the_first_of_them():
+    """A poor track (misses, a wrong position) hides the serve's launch and passes a late one; the decoded
+    hits alternate from the serve on (near, far, near): the first of that run is the serve. A false catch
+    of the server before it (near, then the near serve) does not start the run."""
+    fps = 30.0
+    T = 300
+    xy = np.full((T, 2), np.nan)                       # the tracker lost the ball until frame 200 ...
+    t = (np.arange(200, T) - 200) / fps
+    xy[200:] = np.c_[0.5 + 0.02 * t, 0.8 - 0.9 * t]     # ... then a fast launch out of rest-like jitter at 200
+    xy[195:200] = [0.5, 0.8]
+    frames = np.array([20, 40, 70, 100, 125, 150, 175, 200])
+    labels = ["ground", "player_near", "ground", "player_near", "ground", "player_far", "ground", "player_near"]
+    seg = segment_rally(xy, fps, frames, labels)
+    assert seg.start == 100 and seg.serve_source == "chain"
+    assert seg.inside.tolist() == [False, False, False, True, True, True, True, True]
+    # the run needs hits by alternating sides within max_flight_s: off, the old answer (the track's launch)
+    from inference.events.rally import RallyParams, chain_serve
+
+    old = segment_rally(xy, fps, frames, labels, params=RallyParams(chain_hits=0))
+    assert old.start >= 195
+    assert chain_serve(frames, labels, ("player_near", "player_far"), fps, RallyParams()) == (100, 150)
+    spread = np.array([20, 40, 70, 100, 125, 250, 275, 300])     # 150 frames (5 s) between two hits: no run
+    assert chain_serve(spread, labels, ("player_near", "player_far"), fps, RallyParams()) is None
