@@ -20,7 +20,8 @@ the ball must first land in the other half, inside the lines; the net, a wall fi
 bounce in one half end the point); else the second floor bounce after a hit (not when the camera puts
 the two in opposite halves: a hit was missed between them); else, when the events stop
 (a gap of ``gap_s`` in the track, no event for ``max_flight_s``), where the ball is lost, stands still,
-or ``dead_s`` after the last event. Times are in seconds and distances in image heights, so the
+or ``dead_s`` after the last event. When the decoded hits after that end hold a run of alternating sides
+(:func:`chain_serve`) starting within ``resume_s``, the end was false and the point goes on from the run. Times are in seconds and distances in image heights, so the
 constants hold at 25–60 fps.
 
 Example:
@@ -70,7 +71,8 @@ class RallyParams:
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
         gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
         dead_s: the ball is dead this long after the last event when the track goes on.
-        resume_s: a rules' end is undone when the ball lands in the other half within this long after it.
+        resume_s: an end is undone when, within this long after it, the ball lands in the other half (a rules'
+            end) or a run of ``chain_hits`` alternating hits starts.
         still_s, still_speed: the ball moving less than ``still_speed`` image heights per second for
             ``still_s`` ends the point.
     """
@@ -608,6 +610,11 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
         source = "hit" if len(hit_frames) else "none"
     land = floor_positions(xy, frames, camera) if camera is not None and sides is not None else None
     end, last = rally_end(xy, fps, start, frames, labels, hits, aspect, params, land, sides)
+    while params.chain_hits > 0 and last < len(frames):   # the hits go on alternating: the end was false
+        more = chain_serve(frames[last:], labels[last:], hits, fps, params)
+        if more is None or more[0] - end > params.resume_s * fps:
+            break
+        end, last = rally_end(xy, fps, more[0], frames, labels, hits, aspect, params, land, sides)
     first = int(np.searchsorted(frames, start, side="left"))
     if params.serve_bounce and first > 0 and labels[first - 1] not in hits and \
             start - frames[first - 1] <= params.serve_bounce_s * fps:

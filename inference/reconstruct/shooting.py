@@ -135,7 +135,7 @@ class ShootingConfig:
     court_sigma: float = 0.01         # m, hinge on a frame below the floor or through a wall
     net_sigma: float = 0.02           # m
     limit_sigma: float = 0.05         # m, hinge of the hit-height range
-    reseed_sigmas: float = 5.0         # a run-out this many σ off its bounce's rebound restarts from the rebound
+    reseed_sigmas: float = 5.0         # a run-out leaving its bounce backwards this many σ off the rebound restarts from it
     free_end_speed_sigma: float = 8.0  # m/s, Student-t pull towards rest of a free end's velocity or of a
     #                                    flight leaving the net/a mesh (its motion along the ray is unseen)
     fit_spin: bool = True
@@ -843,11 +843,14 @@ class Problem:
             rows.add(rho, lambda d=d, idx=idx: [(idx[None, :].repeat(3, 0), np.diag(d / sig))])
 
     def seed_runouts(self, theta: np.ndarray, fl: Flights) -> np.ndarray | None:
-        """θ with each run-out that leaves a floor/glass bounce more than ``reseed_sigmas`` σ off the impact
-        model's rebound of its incoming flight restarted from that rebound, when that costs less with the physics on than θ as it is (None: no change).
-        Without the impact model (the first pass) a run-out's depth is pinned by its 2D track alone, and seen
-        from behind a ball moving away fits as well as one coming back towards the camera; LM does not leave
-        that basin once the impact model joins."""
+        """θ with each run-out that leaves a floor/glass bounce backwards (its velocity along the surface
+        opposite to the incoming flight's, which no rebound does) and more than ``reseed_sigmas`` σ off the
+        impact model's rebound restarted from that rebound, when that costs less with the physics on than θ as
+        it is (None: no change). Without the impact model (the first pass) a run-out's depth is pinned by its
+        2D track alone, and seen from behind or obliquely a ball moving away fits as well as one coming back
+        towards the camera; LM does not leave that basin once the impact model joins. A run-out that goes on
+        forwards but far off the rebound is left alone: there the contact is more likely wrong (a wall the
+        events missed) and a restart can turn a flight that fails its checks into a wrong one that passes."""
         ch = self.chain
         taus = self.taus(theta)
         cand = theta.copy()
@@ -868,6 +871,10 @@ class Problem:
             dn = float(dv @ ct.normal)
             if np.hypot(dn / s_n, np.linalg.norm(dv - dn * ct.normal) / s_t) < self.cfg.reseed_sigmas:
                 continue                   # the run-out is about what the impact model says: leave it
+            t_in = inc[1] - (inc[1] @ ct.normal) * ct.normal
+            t_out = theta[out[0].vel] - (theta[out[0].vel] @ ct.normal) * ct.normal
+            if t_in @ t_out >= 0:
+                continue                   # it goes on along the surface: a wrong contact more likely than a wrong depth
             cand[out[0].vel] = vo[0]
             if out[0].spin is not None:
                 cand[out[0].spin] = wo[0]
@@ -945,10 +952,11 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     problem.physics = True
     n = sol.iterations
     seeded = problem.seed_runouts(sol.theta, sol.aux["flights"])
-    if seeded is None:
-        sol = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
-    else:
-        sol = lm(problem, seeded, max_iter or cfg.max_iter)
+    plain = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
+    if seeded is not None:   # both starts: the restarted run-outs only where they end lower
+        other = lm(problem, seeded, max_iter or cfg.max_iter)
+        plain = other if float(other.r @ other.r) < float(plain.r @ plain.r) else plain
+    sol = plain
     sol.iterations += n
     for _ in range(cfg.irls_passes - 1):
         problem.reweight()

@@ -356,3 +356,20 @@ def test_a_track_serve_after_the_rallys_alternating_hits_gives_way_to_the_first_
     assert chain_serve(frames, labels, ("player_near", "player_far"), fps, RallyParams()) == (100, 150)
     spread = np.array([20, 40, 70, 100, 125, 250, 275, 300])     # 150 frames (5 s) between two hits: no run
     assert chain_serve(spread, labels, ("player_near", "player_far"), fps, RallyParams()) is None
+
+
+def test_the_point_goes_on_when_the_hits_go_on_alternating_after_a_false_end():
+    """The model missed the hits of 3 s of play (no event for longer than max_flight_s ends the point), but
+    after it the decoded hits alternate again (far, near, far) within resume_s: the end was false and the
+    point goes on to the second bounce at the end."""
+    fps = 30.0
+    xy = np.tile([0.5, 0.5], (460, 1)).astype(float) + np.linspace(0, 0.3, 460)[:, None]
+    frames = np.array([100, 120, 140, 165, 185, 275, 300, 320, 345, 365, 390, 420])
+    labels = ["player_near", "ground", "player_far", "ground", "player_near",
+              "player_far", "ground", "player_near", "ground", "player_far", "ground", "ground"]
+    seg = segment_rally(xy, fps, frames, labels)
+    assert seg.start == 100 and seg.end == 420 and seg.inside.all()
+    from inference.events.rally import RallyParams
+
+    cut = segment_rally(xy, fps, frames, labels, params=RallyParams(chain_hits=0))   # the old answer
+    assert cut.end < 275 and cut.inside.tolist() == [True] * 5 + [False] * 7
