@@ -39,6 +39,7 @@ import numpy as np
 
 from inference.court import Court, Material, Plane
 from inference.physics import DEFAULT_DT, FlightModel, rk4_step
+from inference.physics import bounce as impact
 from training.synth.types import Contact
 
 #: Index ranges of the 9-component state rows (x, y, z, vx, vy, vz, wx, wy, wz).
@@ -142,16 +143,12 @@ def refine_crossing(
     return tau, state
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(3,) × (3,) without np.cross's overhead."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
 def bounce(
     vel: np.ndarray, spin: np.ndarray, normal: np.ndarray, material: Material, radius: float,
     inertia_factor: float = 2.0 / 3.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid-sphere impact with restitution and Coulomb friction (grip or slide).
+    """Rigid-sphere impact with restitution and Coulomb friction (grip or slide): one contact of
+    :func:`inference.physics.bounce`, the model the reconstruction fits.
 
     Args:
         vel, spin: (3,) velocity (m/s) and angular velocity (rad/s) just before the contact.
@@ -162,20 +159,8 @@ def bounce(
     Returns:
         (vel, spin) (3,) just after the contact.
     """
-    n = np.asarray(normal, dtype=float)
-    v = np.asarray(vel, dtype=float)
-    w = np.asarray(spin, dtype=float)
-    vn = float(v @ n)
-    vt = v - vn * n
-    slip = vt - radius * _cross(w, n)  # velocity of the contact point (at -r n), tangential
-    # An impulse J along the surface changes the slip by J/m (1 + 1/α); gripping needs J = -slip m α/(1+α).
-    grip = inertia_factor / (1.0 + inertia_factor)
-    limit = material.friction * (1.0 + material.restitution) * abs(vn)
-    slip_speed = float(np.linalg.norm(slip))
-    j = -grip * slip if grip * slip_speed <= limit else -limit * slip / slip_speed  # impulse / m
-    new_v = vt + j - material.restitution * vn * n
-    new_w = w - _cross(n, j) / (inertia_factor * radius)
-    return new_v, new_w
+    v, w = impact(vel, spin, normal, material.restitution, material.friction, radius, inertia_factor)
+    return v[0], w[0]
 
 
 _PLANE_SETS: dict[int, tuple[Court, _PlaneSet]] = {}
