@@ -89,8 +89,8 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
         wait_until(moved, what="the ball to move on screen")
         out = os.environ.get("REVIEW_SCREENSHOT")
         if out:
-            page.set_viewport_size({"width": 1280, "height": 720})
-            page.mouse.move(5, 700)  # no tooltip
+            page.set_viewport_size({"width": 1600, "height": 900})
+            page.mouse.move(5, 880)  # no tooltip
             session.playback.seek(45)
             session.render()
             pngs = [page.screenshot()]
