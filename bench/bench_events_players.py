@@ -2,13 +2,15 @@
 
     .venv/bin/python bench/bench_events_players.py [--sport tennis] [--clips 60] [--fps 50]
         [--weights shipped runs/hitnet_tennis_players.pth.tar ...] [--bridge-too] [--out FILE.md]
+        [--degrade conf/data/degrade/detector_measured.yaml] [--only annotated real measured]
 
 Held-out simulated rallies (seed 6161, never used for training or tuning) with their articulated players
 (they swing at their hits) seen through pose-backend noise (``training.events.pose_noise``: misses, the far
 player more often, jitter, lost wrists, left/right flips, near/far swaps, clips without players or
 poses); every event kept, ±2 frames at 50 fps (scaled with fps). Ball conditions: the annotated track,
 a real-tracker-like track without gaps at the contacts (whole pixels, the far end lost more often, the top
-5 % cropped, misses, outliers, smoothing) and the same with 90 % of the hits hidden. A player-aware model is
+5 % cropped, misses, outliers, smoothing) and the same with 90 % of the hits hidden; ``--degrade FILE`` adds
+the degradation measured on the project's own detector (``conf/data/degrade/detector_measured.yaml``). A player-aware model is
 scored twice: with the players and without any (``players.csv`` missing: it must still work). Prints one
 Markdown table per condition and the CPU time (``time.process_time``).
 
@@ -92,7 +94,16 @@ def main(argv=None) -> None:
     n_found = sum(p is not None and len(p) > 0 for p in players)
     lines = [f"{args.sport}, {source}; every event kept, ±2 frames at 50 fps (scaled); {n_found} clips with players",
              ""]
-    for cond, kw in CONDITIONS.items():
+    conditions = dict(CONDITIONS)
+    if args.degrade:   # our detector's measured degradation (docs/events.md#our-detectors-tracks-measured)
+        import yaml
+
+        with open(args.degrade) as f:
+            conditions[f"measured detector ({args.degrade})"] = {k: v for k, v in yaml.safe_load(f).items()
+                                                                 if k != "measured"} | {"p_clean": 0.0}
+    if args.only:
+        conditions = {k: v for k, v in conditions.items() if any(k.startswith(o) for o in args.only)}
+    for cond, kw in conditions.items():
         tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig(**kw))
         lines += [f"**{cond}**", "", "| model | all | " + " | ".join(cs.classes[1:]) + " |", "|---|" + "---|" * cs.n]
         for name, det, pl, bridge in rows:
