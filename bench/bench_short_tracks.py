@@ -27,10 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from inference.camera import Camera  # noqa: E402
 from inference.court import load_court  # noqa: E402
-from inference.physics import FlightModel  # noqa: E402
 from inference.reconstruct import Observations  # noqa: E402
 from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
-from training.synth.short_tracks import FPS, hitter_players, simulate  # noqa: E402
+from training.synth.short_tracks import FPS, draw_tracks, hitter_players  # noqa: E402
 
 SIZE = (1280, 720)
 #: (eye, target, horizontal field of view) of the three views of each sport
@@ -54,13 +53,7 @@ REACH = {"tennis": (0.4, 1.1), "table_tennis": (0.2, 0.7)}
 
 def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = None, sport: str = "tennis") -> None:
     court = load_court(sport)
-    model = FlightModel.from_ball(court.ball)
-    rng = np.random.default_rng(seed)
-    tracks = []
-    while len(tracks) < n:
-        tr = simulate(rng, court, model)
-        if tr is not None:
-            tracks.append(tr)
+    tracks = draw_tracks(court, n, seed)
     print(f"{n} simulated tracks ({sport.replace('_', ' ')} ball and court), 25 fps, hit → bounce → 3–8 frames, "
           f"{np.mean([len(t['frames']) for t in tracks]):.0f} frames on average, noise σ ∈ {noise} px\n")
     print("| camera | events | reconstructed | along-ray median m | along mean m | across median m | "

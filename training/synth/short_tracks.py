@@ -121,6 +121,19 @@ def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: fl
     return {"frames": frames, "xyz": pos, "bounce": bounce_frame, "hit": 0, "after": int(after), "hit_xyz": hit}
 
 
+def draw_tracks(court: Court, n: int, seed: int, fps: float = FPS) -> list[dict]:
+    """The first ``n`` tracks :func:`simulate` draws (shots that fail are drawn again) from ``seed``, with the
+    court's ball."""
+    model = FlightModel.from_ball(court.ball)
+    rng = np.random.default_rng(seed)
+    out: list[dict] = []
+    while len(out) < n:
+        tr = simulate(rng, court, model, fps)
+        if tr is not None:
+            out.append(tr)
+    return out
+
+
 def hitter_players(rng: np.random.Generator, track: dict, sigma_m: float = 0.3,
                    reach: tuple[float, float] = (0.4, 1.1), behind_m: float = 0.2) -> PlayerTracks:
     """players.csv of the track's hitter at the hit frame, as a players stage would place them: the body

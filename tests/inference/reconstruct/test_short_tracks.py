@@ -10,10 +10,9 @@ import pytest
 
 from inference.camera import Camera
 from inference.court import load_court
-from inference.physics import FlightModel
 from inference.reconstruct import Observations
 from inference.reconstruct.joint import JointConfig, fit_joint
-from training.synth.short_tracks import FPS, hitter_players, simulate
+from training.synth.short_tracks import FPS, draw_tracks, hitter_players
 
 SIZE = (1280, 720)
 
@@ -21,14 +20,7 @@ SIZE = (1280, 720)
 @pytest.fixture(scope="module")
 def tracks():
     court = load_court("tennis")
-    model = FlightModel.from_ball(court.ball)
-    rng = np.random.default_rng(5)
-    out = []
-    while len(out) < 6:
-        tr = simulate(rng, court, model)
-        if tr is not None:
-            out.append(tr)
-    return court, out
+    return court, draw_tracks(court, 6, 5)
 
 
 @pytest.mark.parametrize("events", ["hit + bounce", "bounce only", "hit + bounce + hitter"])
@@ -69,14 +61,7 @@ TT_VIEWS = {
 
 def _tt_tracks(seed: int, n: int):
     court = load_court("table_tennis")
-    model = FlightModel.from_ball(court.ball)
-    rng = np.random.default_rng(seed)
-    out = []
-    while len(out) < n:
-        tr = simulate(rng, court, model)
-        if tr is not None:
-            out.append(tr)
-    return court, out
+    return court, draw_tracks(court, n, seed)
 
 
 def _fit_errors(court, cam, tr, k: int, bounce_only: bool):
@@ -117,13 +102,7 @@ def test_a_run_out_restarts_from_its_bounce_rebound():
     it (Problem.seed_runouts). Track 16 of bench_short_tracks.py's draw (tennis, oblique view, the bounce as the
     only event) had its run-out 34 m off before; the other tracks' worst frame is 1.6 m."""
     court = load_court("tennis")
-    model = FlightModel.from_ball(court.ball)
-    rng = np.random.default_rng(0)
-    trs = []
-    while len(trs) < 17:
-        tr = simulate(rng, court, model)
-        if tr is not None:
-            trs.append(tr)
+    trs = draw_tracks(court, 17, 0)
     cam = Camera.from_look_at((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), SIZE, fov_deg=60.0)
     tr, r2 = trs[16], np.random.default_rng(16)
     uv = cam.project(tr["xyz"]) + r2.normal(0.0, r2.uniform(2.0, 3.0), (len(tr["xyz"]), 2))
