@@ -138,7 +138,7 @@ def run_courts(args: argparse.Namespace) -> int:
     if not args.court:
         for f in sorted((CONF_DIR / "court").glob("*.yaml")):
             c = load_court(f)
-            print(f"{c.name:<10} {c.size[0]:g} x {c.size[1]:g} m, {len(c.points)} points, "
+            print(f"{c.name:<13} {c.size[0]:g} x {c.size[1]:g} m, {len(c.points)} points, "
                   f"{len(c.planes)} planes  ({f})")
         return 0
     c = load_court(args.court)
