@@ -3,7 +3,7 @@ the point (``simulate_clips(..., around=True)``): serve frame within ±3 frames,
 event F1 of the rally's events with and without the segmentation (the shipped model of the sport).
 
     .venv/bin/python bench/bench_rally.py [--sport padel] [--clips 100] [--track annotated|degraded]
-        [--fps 25] [--seed 8] [--plain] [--players] [--why]
+        [--fps 25] [--seed 8] [--plain] [--players] [--degrade conf/data/degrade/detector_measured.yaml] [--why]
 
 Prints the figures and the CPU time; the clips are held out from training (their own seed).
 """
@@ -46,6 +46,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--sport", default="padel")
     ap.add_argument("--clips", type=int, default=100)
     ap.add_argument("--track", choices=["annotated", "degraded"], default="annotated")
+    ap.add_argument("--degrade", default=None,
+                    help="with --track degraded: a data.degrade YAML instead of the default degradation "
+                    "(e.g. conf/data/degrade/detector_measured.yaml, our detector as measured)")
     ap.add_argument("--fps", type=float, default=None, help="fix the frame rate (default: drawn 25–60)")
     ap.add_argument("--seed", type=int, default=8, help="clips of seed 7000 + this (7: the tuning set)")
     ap.add_argument("--weights", default=None, help="hit-event model (default: the shipped one)")
@@ -61,8 +64,13 @@ def main(argv=None) -> dict:
     t0 = time.process_time()
     clips = simulate_clips(args.sport, args.clips, 7000 + args.seed, args.cache, progress=False,
                            around=not args.plain, fps=args.fps, players=args.players)
-    tracks = [c.ball for c in clips] if args.track == "annotated" else degrade_all(
-        clips, args.seed, DegradeConfig(p_clean=0.0))
+    degrade = DegradeConfig(p_clean=0.0)
+    if args.degrade:
+        import yaml
+
+        with open(args.degrade) as f:
+            degrade = DegradeConfig(**{k: v for k, v in yaml.safe_load(f).items() if k != "measured"} | {"p_clean": 0.0})
+    tracks = [c.ball for c in clips] if args.track == "annotated" else degrade_all(clips, args.seed, degrade)
     players = [None] * len(clips)
     weights = args.weights
     if args.players:
@@ -103,7 +111,7 @@ def main(argv=None) -> dict:
     kind = "without" if args.plain else "with"
     model = "player-aware model, players through the measured pose noise" if args.players else "ball-only model"
     print(f"\n{args.sport}, {len(clips)} simulated rallies {kind} pre-serve bounces and the ball after the point, "
-          f"{args.track} track, {fps}, {model}")
+          f"{args.track} track{' (' + args.degrade + ')' if args.degrade and args.track == 'degraded' else ''}, {fps}, {model}")
     print(f"serve frame within ±3 frames: {out['serve_within_3']:.1%} (median |error| "
           f"{out['serve_median_abs_frames']:.1f} frames; serve from {sources})")
     print(f"end within ±0.3 s: {out['end_within_0.3s']:.1%} (median |error| {out['end_median_abs_s']:.2f} s)")
