@@ -40,14 +40,20 @@ def arg_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def conditions_of(args) -> dict:
-    """The conditions to run: the standard ones, a measured ``--degrade`` file, filtered by ``--only``."""
-    conditions = dict(CONDITIONS)
-    if args.degrade:
-        import yaml
+def measured_degrade(path) -> dict:
+    """A measured ``data.degrade`` YAML (bench_track_stats.py) as a condition: every clip degraded."""
+    import yaml
 
-        with open(args.degrade) as f:
-            conditions[f"measured detector ({args.degrade})"] = {**yaml.safe_load(f), "p_clean": 0.0}
+    with open(path) as f:
+        return {**yaml.safe_load(f), "p_clean": 0.0}
+
+
+def conditions_of(args, base: dict | None = None) -> dict:
+    """The conditions to run: the standard ones (``base``, default :data:`CONDITIONS`), a measured
+    ``--degrade`` file, filtered by ``--only``."""
+    conditions = dict(CONDITIONS if base is None else base)
+    if args.degrade:
+        conditions[f"measured detector ({args.degrade})"] = measured_degrade(args.degrade)
     if args.only:
         conditions = {k: v for k, v in conditions.items() if any(k.startswith(o) for o in args.only)}
     return conditions

@@ -27,7 +27,7 @@ from pathlib import Path
 import torch
 
 from bench_event_conditions import CONDITIONS as BALL_CONDITIONS  # bench/ is the script's folder
-from bench_event_conditions import arg_parser, event_counts
+from bench_event_conditions import arg_parser, conditions_of, event_counts
 
 GAPS = BALL_CONDITIONS["real-tracker-like, gaps at contacts"]
 CONDITIONS = {
@@ -94,17 +94,8 @@ def main(argv=None) -> None:
     n_found = sum(p is not None and len(p) > 0 for p in players)
     lines = [f"{args.sport}, {source}; every event kept, ±2 frames at 50 fps (scaled); {n_found} clips with players",
              ""]
-    conditions = dict(CONDITIONS)
-    if args.degrade:   # our detector's measured degradation (docs/events.md#our-detectors-tracks-measured)
-        import yaml
-
-        with open(args.degrade) as f:
-            conditions[f"measured detector ({args.degrade})"] = {k: v for k, v in yaml.safe_load(f).items()
-                                                                 if k != "measured"} | {"p_clean": 0.0}
-    if args.only:
-        conditions = {k: v for k, v in conditions.items() if any(k.startswith(o) for o in args.only)}
-    for cond, kw in conditions.items():
-        tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig(**kw))
+    for cond, kw in conditions_of(args, CONDITIONS).items():
+        tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig.from_dict(kw))
         lines += [f"**{cond}**", "", "| model | all | " + " | ".join(cs.classes[1:]) + " |", "|---|" + "---|" * cs.n]
         for name, det, pl, bridge in rows:
             s = event_counts(det, clips, tracks, pl, bridge_gaps=bridge).scores

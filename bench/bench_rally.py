@@ -36,6 +36,8 @@ def print_why(c, res) -> None:
 
 
 def main(argv=None) -> dict:
+    from bench_event_conditions import measured_degrade  # bench/ is the script's folder
+
     from inference.events import EventDetector
     from inference.events.features import dense_xy
     from inference.events.metrics import EventCounts, tolerance_frames
@@ -64,12 +66,7 @@ def main(argv=None) -> dict:
     t0 = time.process_time()
     clips = simulate_clips(args.sport, args.clips, 7000 + args.seed, args.cache, progress=False,
                            around=not args.plain, fps=args.fps, players=args.players)
-    degrade = DegradeConfig(p_clean=0.0)
-    if args.degrade:
-        import yaml
-
-        with open(args.degrade) as f:
-            degrade = DegradeConfig(**{k: v for k, v in yaml.safe_load(f).items() if k != "measured"} | {"p_clean": 0.0})
+    degrade = DegradeConfig.from_dict(measured_degrade(args.degrade)) if args.degrade else DegradeConfig(p_clean=0.0)
     tracks = [c.ball for c in clips] if args.track == "annotated" else degrade_all(clips, args.seed, degrade)
     players = [None] * len(clips)
     weights = args.weights

@@ -652,6 +652,14 @@ class Problem:
                 return s, theta[f.vel], w, None, 1.0
         return None
 
+    def _bounce_sigmas(self, v_in: np.ndarray, normal: np.ndarray) -> tuple[float, float]:
+        """σ (m/s) of the outgoing velocity around the impact model's, along the normal and along the surface,
+        for an incoming velocity ``v_in`` (3,)."""
+        cfg = self.cfg
+        vn = abs(float(v_in @ normal))
+        return (cfg.bounce_sigma_normal * vn + cfg.bounce_sigma_floor,
+                cfg.bounce_sigma_tangent * float(np.linalg.norm(v_in)) + cfg.bounce_sigma_floor)
+
     def _bounces(self, theta, fl, taus, rows: _Rows, through) -> None:
         """The impact model at floor/glass contacts with flights on both sides."""
         ch, cfg = self.chain, self.cfg
@@ -682,10 +690,7 @@ class Problem:
         for q, (ct, so, (si, vin, win, dvin, decay)) in enumerate(todo):
             n = ct.normal
             vo, wo = VO[7 * q:7 * q + 7], WO[7 * q:7 * q + 7]
-            speed = float(np.linalg.norm(vin))
-            vn = abs(float(vin @ n))
-            s_n = cfg.bounce_sigma_normal * vn + cfg.bounce_sigma_floor
-            s_t = cfg.bounce_sigma_tangent * speed + cfg.bounce_sigma_floor
+            s_n, s_t = self._bounce_sigmas(vin, n)
             # residual in (normal, tangential) components
             Pn = np.outer(n, n)
             scale = (Pn / s_n + (np.eye(3) - Pn) / s_t)                         # (3, 3) symmetric
@@ -865,9 +870,7 @@ class Problem:
             vo, wo = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
                             ct.material.friction, self.obs.court.ball.radius)
             dv = theta[out[0].vel] - vo[0]
-            vn = abs(float(inc[1] @ ct.normal))
-            s_n = self.cfg.bounce_sigma_normal * vn + self.cfg.bounce_sigma_floor
-            s_t = self.cfg.bounce_sigma_tangent * float(np.linalg.norm(inc[1])) + self.cfg.bounce_sigma_floor
+            s_n, s_t = self._bounce_sigmas(inc[1], ct.normal)
             dn = float(dv @ ct.normal)
             if np.hypot(dn / s_n, np.linalg.norm(dv - dn * ct.normal) / s_t) < self.cfg.reseed_sigmas:
                 continue                   # the run-out is about what the impact model says: leave it

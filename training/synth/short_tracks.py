@@ -32,11 +32,11 @@ class Shots:
         aim: (x, y) ranges of the point aimed at on the playing surface (sets the direction only).
         speed, elevation: launch speed and angle above the horizontal.
         spin: signed spin about the horizontal axis across the shot (negative: topspin).
-        surface: the playing surface's material and height: the ball bounces where its centre comes down
-            to ``surface_z`` + radius.
-        net_top: height the ball's centre must clear at the net (its radius and a margin added).
         land_x, land_y: where the bounce must be (a shot landing elsewhere is drawn again).
         duration: seconds of flight simulated to find the bounce.
+
+    The playing surface (height, material) is the court's first ``ground`` plane and the net's height its
+    ``net_center_top`` point.
     """
 
     hit: tuple[Range, Range, Range]
@@ -44,9 +44,6 @@ class Shots:
     speed: Range
     elevation: Range
     spin: Range
-    surface: str
-    surface_z: float
-    net_top: float
     land_x: Range
     land_y: Range
     duration: float = 3.0
@@ -61,13 +58,12 @@ class Shots:
 #: The shots of each court's sport
 SHOTS: dict[str, Shots] = {
     "tennis": Shots(hit=((1.5, 9.5), (-1.0, 3.0), (0.5, 1.6)), aim=((1.5, 9.5), (15.0, 22.5)), speed=(15.0, 32.0),
-                    elevation=(2.0, 14.0), spin=(-250.0, 150.0), surface="floor", surface_z=0.0, net_top=0.914,
-                    land_x=(-np.inf, np.inf), land_y=(-np.inf, 23.77 + 2.0)),
+                    elevation=(2.0, 14.0), spin=(-250.0, 150.0), land_x=(-np.inf, np.inf),
+                    land_y=(-np.inf, 23.77 + 2.0)),
     # drives, loops and pushes from 0.2-1 m behind the end line, 5-16 m/s, up to about 95 rev/s of topspin
     "table_tennis": Shots(hit=((0.1, 1.425), (-0.8, -0.2), (0.8, 1.15)), aim=((0.3, 1.225), (1.8, 2.5)),
-                          speed=(6.0, 14.0), elevation=(3.0, 20.0), spin=(-500.0, 250.0), surface="table",
-                          surface_z=0.76, net_top=0.76 + 0.1525, land_x=(0.0, 1.525), land_y=(1.37, 2.74),
-                          duration=1.0),
+                          speed=(6.0, 14.0), elevation=(3.0, 20.0), spin=(-500.0, 250.0), land_x=(0.0, 1.525),
+                          land_y=(1.37, 2.74), duration=1.0),
 }
 
 
@@ -78,7 +74,9 @@ def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: fl
     ``SHOTS[court.sport]``."""
     sh = shots or SHOTS[court.sport]
     r = court.ball.radius
-    mat = court.materials[sh.surface]
+    surface = court.planes_for("ground")[0]
+    surface_z, mat = float(surface.origin[2]), court.materials[surface.material]
+    net_top = float(court.points["net_center_top"][2])
     hit = np.array([rng.uniform(*sh.hit[0]), rng.uniform(*sh.hit[1]), rng.uniform(*sh.hit[2])])
     land = np.array([rng.uniform(*sh.aim[0]), rng.uniform(*sh.aim[1])])
     speed = rng.uniform(*sh.speed)
@@ -90,20 +88,20 @@ def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: fl
     dt = 1.0 / 1000.0
     s = integrate(hit, vel, spin, sh.duration, model, dt=dt)
     z = s.pos[:, 0, 2]
-    below = np.flatnonzero(z <= sh.surface_z + r)
+    below = np.flatnonzero(z <= surface_z + r)
     if not len(below):
         return None
     k = int(below[0])
     net = np.flatnonzero((s.pos[:k, 0, 1] >= court.net_y))
     x_b, y_b = s.pos[k, 0, :2]
-    if (not len(net) or s.pos[net[0], 0, 2] < sh.net_top + 3 * r
+    if (not len(net) or s.pos[net[0], 0, 2] < net_top + 3 * r
             or not sh.land_x[0] <= x_b <= sh.land_x[1] or not sh.land_y[0] <= y_b <= sh.land_y[1]):
         return None                                          # into the net or off the surface: not a rally shot
     t_b = s.t[k]
     up = np.array([0.0, 0.0, 1.0])
     v_out, w_out = bounce(s.vel[k], s.spin[k], up, mat.restitution, mat.friction, r)
     p_b = s.pos[k, 0].copy()
-    p_b[2] = sh.surface_z + r
+    p_b[2] = surface_z + r
     after = rng.integers(3, 9)
     t_hit = -rng.uniform(0.0, 1.0 / fps)                    # the hit between frames −1 and 0 (seconds)
     last = int(np.floor((t_b + t_hit) * fps)) + int(after)
