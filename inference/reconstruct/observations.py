@@ -28,6 +28,9 @@ PLAYER_EVENTS = ("player_near", "player_far")
 FAR_GAP = 10
 #: COCO-17 indices of the wrists (the hitter's hand height when players.csv has poses)
 WRISTS = (COCO17.index("left_wrist"), COCO17.index("right_wrist"))
+SHOULDERS = (COCO17.index("left_shoulder"), COCO17.index("right_shoulder"))
+#: a hand this far (m) above both shoulders is raised (a serve, a smash)
+RAISED_M = 0.15
 
 
 @dataclass
@@ -139,6 +142,7 @@ class ContactPrior:
         candidates: the planes the label allows.
         hitter_xy: (2,) the hitter's court position for a racket hit when players.csv has it.
         hand_z: the hitter's hand (wrist) height (m) when players.csv has a pose for that frame, else None.
+        hand_raised: that hand is above both shoulders (a serve, a smash: the ball is above it).
         outside: the line of sight misses the surface's extent: the point is on the unbounded plane.
         reason: why no point could be made (empty when fine).
     """
@@ -151,6 +155,7 @@ class ContactPrior:
     candidates: list[Plane] = field(default_factory=list)
     hitter_xy: np.ndarray | None = None
     hand_z: float | None = None
+    hand_raised: bool = False
     outside: bool = False
     reason: str = ""
 
@@ -198,24 +203,44 @@ def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
     return int(rows[int(np.argmin(dist))])
 
 
-def hand_height(obs: Observations, row: int, uv: np.ndarray | None) -> float | None:
-    """Height (m) of the hitter's hand nearest the ball in the image: the wrist's line of sight meets the
-    upright plane through the player's court position facing the camera. None without a usable wrist."""
+def keypoint_heights(obs: Observations, row: int, joints: tuple[int, ...]) -> np.ndarray:
+    """(J,) heights (m) of the hitter's keypoints ``joints``: each one's line of sight meets the upright plane
+    through the player's court position facing the camera; NaN where the keypoint is missing, unsure
+    (score ≤ 0.3) or its height is outside 0–3.5 m."""
     p = obs.players
-    kp = p.keypoints[row, list(WRISTS)]                                   # (2, 3) normalised x, y, score
+    kp = p.keypoints[row, list(joints)]                                   # (J, 3) normalised x, y, score
+    out = np.full(len(joints), np.nan)
     ok = np.isfinite(kp).all(axis=1) & (kp[:, 2] > 0.3)
-    if not ok.any():
-        return None
-    px = kp[ok, :2] * np.asarray(obs.camera.image_size, float)
-    w = px[int(np.argmin(np.linalg.norm(px - uv, axis=1)))] if uv is not None else px[0]
-    o, d = obs.camera.rays(w[None])
     foot = np.array([*p.court_xy[row], 0.0])
     n = foot - obs.camera.centre
     n[2] = 0.0
-    if np.linalg.norm(n) < 1e-6 or abs(d[0] @ n) < 1e-9:
-        return None
-    z = float((o[0] + ((foot - o[0]) @ n) / (d[0] @ n) * d[0])[2])
-    return z if 0.0 <= z <= 3.5 else None
+    if not ok.any() or np.linalg.norm(n) < 1e-6:
+        return out
+    o, d = obs.camera.rays(kp[ok, :2] * np.asarray(obs.camera.image_size, float))
+    dn = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (o + (((foot - o) @ n) / dn)[:, None] * d)[:, 2]
+    z[(np.abs(dn) < 1e-9) | ~((z >= 0.0) & (z <= 3.5))] = np.nan
+    out[ok] = z
+    return out
+
+
+def hand_height(obs: Observations, row: int, uv: np.ndarray | None) -> tuple[float | None, bool]:
+    """Height (m) of the hitter's hand nearest the ball in the image (:func:`keypoint_heights`; None without a
+    usable wrist), and whether that hand is raised above both shoulders (a serve or a smash: the ball is
+    then above the hand by about the racket's length)."""
+    z = keypoint_heights(obs, row, WRISTS + SHOULDERS)
+    wz = z[:2]
+    if not np.isfinite(wz).any():
+        return None, False
+    k = np.flatnonzero(np.isfinite(wz))
+    if uv is not None and len(k) > 1:
+        px = obs.players.keypoints[row, list(WRISTS), :2] * np.asarray(obs.camera.image_size, float)
+        k = k[[int(np.argmin(np.linalg.norm(px[k] - uv, axis=1)))]]
+    hand = float(wz[k[0]])
+    shoulders = z[2:]
+    raised = bool(np.isfinite(shoulders).all() and hand > shoulders.max() + RAISED_M)
+    return hand, raised
 
 
 def hit_point_guess(obs: Observations, uv: np.ndarray, hitter_xy: np.ndarray | None) -> np.ndarray:
@@ -265,8 +290,9 @@ def contact_prior(obs: Observations, frame: int, label: str, unbounded_ok: bool 
         hitter = None if row is None else obs.players.court_xy[row]
         point = hit_point_guess(obs, uv, hitter) if uv is not None else np.full(3, np.nan)
         reason = "" if uv is not None else "no 2D ball near the hit frame"
-        hand = hand_height(obs, row, uv) if row is not None else None
-        return ContactPrior(frame, label, "hit", point, hitter_xy=hitter, hand_z=hand, reason=reason)
+        hand, raised = hand_height(obs, row, uv) if row is not None else (None, False)
+        return ContactPrior(frame, label, "hit", point, hitter_xy=hitter, hand_z=hand, hand_raised=raised,
+                            reason=reason)
     planes = obs.court.planes_for(label)
     if not planes:
         return ContactPrior(frame, label, "plane", np.full(3, np.nan),

@@ -54,6 +54,8 @@ class HitPrior:
         dof: Student-t degrees of freedom (small = heavy tails: a wrong hitter position costs little).
         height, sigma_height: typical hit height and spread (m), used when no hand height is known.
         hand_sigma: spread (m) of the hit height around the hand (wrist) height from a pose.
+        raised_above_hand: height (m) of the hit above a hand raised over the shoulders (a serve, a smash:
+            the racket points up), about the wrist-to-sweet-spot length.
         reach: hard limit (m) on the horizontal distance from the hitter.
     """
 
@@ -64,6 +66,7 @@ class HitPrior:
     height: float = 1.1
     sigma_height: float = 0.7
     hand_sigma: float = 0.45
+    raised_above_hand: float = 0.0
     reach: float = 1.6
 
     @classmethod
@@ -138,6 +141,8 @@ class ShootingConfig:
     reseed_sigmas: float = 5.0         # a run-out leaving its bounce backwards this many σ off the rebound restarts from it
     free_end_speed_sigma: float = 8.0  # m/s, Student-t pull towards rest of a free end's velocity or of a
     #                                    flight leaving the net/a mesh (its motion along the ray is unseen)
+    lead_in_back_sigma: float = 2.0    # m/s, hinge on a lead-in reaching a racket hit from behind its hitter
+    lead_in_back_allow: float = 1.0    # m/s of that motion allowed free (a serve's toss drifts), courts without walls
     fit_spin: bool = True
     fit_drag: bool = False
     drag_sigma: float = 0.2
@@ -820,7 +825,8 @@ class Problem:
                 rho, d = student_t(u, hp.dof)
                 rows.add(rho, lambda d=d, fwd=fwd, idx=idx: [
                     (idx[:2][None, :].repeat(2, 0), np.diag([d[0] / hp.sigma_lateral, d[1] * fwd / hp.sigma_forward]))])
-            z0, sz = (ct.prior.hand_z, hp.hand_sigma) if ct.prior.hand_z is not None else (hp.height, hp.sigma_height)
+            z0, sz = (ct.prior.hand_z + hp.raised_above_hand * ct.prior.hand_raised, hp.hand_sigma) \
+                if ct.prior.hand_z is not None else (hp.height, hp.sigma_height)
             rho, d = student_t(np.array([(p[2] - z0) / sz]), hp.dof)
             rows.add(rho, lambda d=d, idx=idx, sz=sz: [(idx[2:3][None, :], np.array([[d[0] / sz]]))])
             viol = p[2] - hi if p[2] > hi else (p[2] - lo if p[2] < lo else 0.0)
@@ -846,20 +852,42 @@ class Problem:
             idx = np.array(f.vel)
             rho, d = student_t(theta[idx] / sig, self.hit_prior.dof)
             rows.add(rho, lambda d=d, idx=idx: [(idx[None, :].repeat(3, 0), np.diag(d / sig))])
+        self._lead_in_from_behind(theta, rows)
 
-    def seed_runouts(self, theta: np.ndarray, fl: Flights) -> np.ndarray | None:
+    def _lead_in_from_behind(self, theta: np.ndarray, rows: _Rows) -> None:
+        """A lead-in arriving at a racket hit comes from the other side of the net or is a toss: on a court
+        without walls (nothing behind the hitter to rebound from) its velocity towards the net, beyond
+        ``lead_in_back_allow``, is a hinge of σ ``lead_in_back_sigma``. Without it a serve's toss seen from
+        behind fits as well as a fast ball flying at the camera from beyond the far baseline (5 m off)."""
+        ch, cfg = self.chain, self.cfg
+        if not cfg.lead_in_back_sigma or self._walls or not ch.has_lead_in:
+            return
+        f = ch.flights[0]
+        if ch.contacts[f.start].kind != "hit":
+            return
+        side = 1.0 if ch.point(theta, f.start)[1] >= self.obs.court.net_y else -1.0
+        towards_net = -side * theta[f.vel[1]]
+        if towards_net > cfg.lead_in_back_allow:
+            s = cfg.lead_in_back_sigma
+            rows.add(np.array([(towards_net - cfg.lead_in_back_allow) / s]),
+                     lambda i=f.vel[1], side=side, s=s: [(np.array([[i]]), np.array([[-side / s]]))])
+
+    def seed_runouts(self, theta: np.ndarray, fl: Flights, theta0: np.ndarray | None = None) -> np.ndarray | None:
         """θ with each run-out that leaves a floor/glass bounce backwards (its velocity along the surface
         opposite to the incoming flight's, which no rebound does) and more than ``reseed_sigmas`` σ off the
         impact model's rebound restarted from that rebound, when that costs less with the physics on than θ as
         it is (None: no change). Without the impact model (the first pass) a run-out's depth is pinned by its
         2D track alone, and seen from behind or obliquely a ball moving away fits as well as one coming back
-        towards the camera; LM does not leave that basin once the impact model joins. A run-out that goes on
+        towards the camera; LM does not leave that basin once the impact model joins. With ``theta0`` (the
+        first pass's start) a second restart also takes the bounce (time, point) and its incoming flight back
+        to where the first pass began them — the first pass can drag them along with the run-out (a ball
+        dropping off the net: the bounce pulled 2.5 frames early, the run-out flying at the camera at
+        67 m/s) — and the lower-cost restart is tried. A run-out that goes on
         forwards but far off the rebound is left alone: there the contact is more likely wrong (a wall the
         events missed) and a restart can turn a flight that fails its checks into a wrong one that passes."""
         ch = self.chain
         taus = self.taus(theta)
-        cand = theta.copy()
-        changed = False
+        flagged = []
         for c, ct in enumerate(ch.contacts):
             if ct.material is None or ct.normal is None:
                 continue
@@ -867,8 +895,8 @@ class Problem:
             inc = self._incoming(theta, fl, taus, c)
             if not out or inc is None or inc[1] @ ct.normal > -0.3:
                 continue
-            vo, wo = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
-                            ct.material.friction, self.obs.court.ball.radius)
+            vo, _ = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
+                           ct.material.friction, self.obs.court.ball.radius)
             dv = theta[out[0].vel] - vo[0]
             s_n, s_t = self._bounce_sigmas(inc[1], ct.normal)
             dn = float(dv @ ct.normal)
@@ -878,14 +906,34 @@ class Problem:
             t_out = theta[out[0].vel] - (theta[out[0].vel] @ ct.normal) * ct.normal
             if t_in @ t_out >= 0:
                 continue                   # it goes on along the surface: a wrong contact more likely than a wrong depth
-            cand[out[0].vel] = vo[0]
-            if out[0].spin is not None:
-                cand[out[0].spin] = wo[0]
-            changed = True
-        if not changed:
+            flagged.append((c, out[0], inc[0]))
+        if not flagged:
             return None
-        costs = [float(np.sum(self.assemble(t, jac=False)[0].residuals() ** 2)) for t in (theta, cand)]
-        return cand if costs[1] < costs[0] else None
+        cands = [self._rebound_runouts(theta.copy(), flagged)]
+        if theta0 is not None:
+            back = theta.copy()
+            for c, _, s in flagged:
+                ct, f_in = ch.contacts[c], ch.flights[s]
+                idx = [ct.tau, *ct.coords, *f_in.vel, *(f_in.spin or []), *([f_in.drag] if f_in.drag is not None else [])]
+                back[idx] = theta0[idx]
+            cands.append(self._rebound_runouts(back, flagged))
+        costs = [float(np.sum(self.assemble(t, jac=False)[0].residuals() ** 2)) for t in (theta, *cands)]
+        best = int(np.argmin(costs))
+        return cands[best - 1] if best else None
+
+    def _rebound_runouts(self, theta: np.ndarray, flagged: list) -> np.ndarray:
+        """θ with the run-outs of ``flagged`` (contact, run-out flight, incoming flight index) set to the
+        impact model's rebound of their incoming flight (at θ)."""
+        fl, taus = self.flights(theta, perturb=False), self.taus(theta)
+        for c, out, _ in flagged:
+            ct = self.chain.contacts[c]
+            inc = self._incoming(theta, fl, taus, c)
+            vo, wo = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
+                            ct.material.friction, self.obs.court.ball.radius)
+            theta[out.vel] = vo[0]
+            if out.spin is not None:
+                theta[out.spin] = wo[0]
+        return theta
 
     def reweight(self) -> None:
         """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
@@ -951,10 +999,11 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     2D points lie beyond ``huber_k`` σ (outliers are down-weighted, not dropped)."""
     cfg = problem.cfg
     problem.physics = False
-    sol = lm(problem, problem.clamp(theta), max_iter or cfg.max_iter)
+    theta0 = problem.clamp(theta)
+    sol = lm(problem, theta0, max_iter or cfg.max_iter)
     problem.physics = True
     n = sol.iterations
-    seeded = problem.seed_runouts(sol.theta, sol.aux["flights"])
+    seeded = problem.seed_runouts(sol.theta, sol.aux["flights"], theta0)
     plain = lm(problem, sol.theta, max_iter or cfg.max_iter, sol.aux["flights"])
     if seeded is not None:   # both starts: the restarted run-outs only where they end lower
         other = lm(problem, seeded, max_iter or cfg.max_iter)
