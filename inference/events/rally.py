@@ -580,6 +580,34 @@ def chain_serve(frames: np.ndarray, labels: list[str], hits, fps: float, params:
     return None
 
 
+def _side_at(xy: np.ndarray, frames: np.ndarray, labels: list[str], hits, t: int) -> str | None:
+    """Which racket-hit label's side of the image the ball is on at frame ``t`` (the nearest seen frame
+    within 3): the one whose decoded hits' median image height is nearer; None when unknown or when the
+    decoded hits are all one side's."""
+    T = len(xy)
+    seen = [u for d in range(4) for u in (t - d, t + d) if 0 <= u < T and np.isfinite(xy[u]).all()]
+    heights = {h: [xy[f, 1] for f, c in zip(frames, labels) if c == h and 0 <= f < T and np.isfinite(xy[f, 1])]
+               for h in hits}
+    if not seen or sum(1 for v in heights.values() if v) < 2:
+        return None
+    y = xy[seen[0], 1]
+    return min((h for h in hits if heights[h]), key=lambda h: abs(y - float(np.median(heights[h]))))
+
+
+def _servers_warm_up(xy: np.ndarray, frames: np.ndarray, labels: list[str], hits, start: int | None,
+                     first: int) -> bool:
+    """Whether a serve found at ``start`` before the first hit ``first`` of the alternating run is the
+    server's warm-up instead (a bounce or a catch that looked like a launch): no decoded event between them
+    (a serve bounces before it is answered; with a bounce between, the answer may be the one missed) and the
+    ball on the same side as that first hit — a serve's answer comes from the other side."""
+    if start is None or start >= first:
+        return False
+    if any(start < f < first for f in frames):
+        return False
+    label = labels[int(np.flatnonzero(frames == first)[0])]
+    return _side_at(xy, frames, labels, hits, start) == label
+
+
 def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=("player_near", "player_far"),
                   aspect: float = 16 / 9, params: RallyParams | None = None,
                   hit_prob: np.ndarray | None = None, camera=None, sides: CourtSides | None = None) -> RallySegment:
@@ -603,8 +631,10 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     hit_frames = np.array([f for f, c in zip(frames, labels) if c in hits], np.int64)
     start, source = find_serve(xy, fps, hit_frames, aspect, params, hit_prob)
     chained = chain_serve(frames, labels, hits, fps, params)
-    if chained is not None and (start is None or start > chained[1] - params.snap_s * fps):
-        start, source = chained[0], "chain"   # the track's serve comes after a hit that answered the chain's first
+    if chained is not None and (start is None or start > chained[1] - params.snap_s * fps
+                                or _servers_warm_up(xy, frames, labels, hits, start, chained[0])):
+        start, source = chained[0], "chain"   # the track's serve comes after a hit that answered the chain's first,
+        #                                       or before it on the same side: the server's bounces, not a serve
     if start is None:
         start = int(hit_frames[0]) if len(hit_frames) else (int(frames[0]) if len(frames) else 0)
         source = "hit" if len(hit_frames) else "none"
