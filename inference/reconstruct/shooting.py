@@ -56,6 +56,8 @@ class HitPrior:
         hand_sigma: spread (m) of the hit height around the hand (wrist) height from a pose.
         raised_above_hand: height (m) of the hit above a hand raised over the shoulders (a serve, a smash:
             the racket points up), about the wrist-to-sweet-spot length.
+        raised_forward: ``forward`` for such a hit (None: ``forward``): a serve's or a smash's ball is met
+            in front of the body, not beside it.
         reach: hard limit (m) on the horizontal distance from the hitter.
     """
 
@@ -67,6 +69,7 @@ class HitPrior:
     sigma_height: float = 0.7
     hand_sigma: float = 0.45
     raised_above_hand: float = 0.0
+    raised_forward: float | None = None
     reach: float = 1.6
 
     @classmethod
@@ -821,7 +824,8 @@ class Problem:
             h = ct.prior.hitter_xy
             if h is not None:
                 fwd = 1.0 if h[1] < self.obs.court.net_y else -1.0
-                u = np.array([(p[0] - h[0]) / hp.sigma_lateral, ((p[1] - h[1]) * fwd - hp.forward) / hp.sigma_forward])
+                ahead = hp.raised_forward if ct.prior.hand_raised and hp.raised_forward is not None else hp.forward
+                u = np.array([(p[0] - h[0]) / hp.sigma_lateral, ((p[1] - h[1]) * fwd - ahead) / hp.sigma_forward])
                 rho, d = student_t(u, hp.dof)
                 rows.add(rho, lambda d=d, fwd=fwd, idx=idx: [
                     (idx[:2][None, :].repeat(2, 0), np.diag([d[0] / hp.sigma_lateral, d[1] * fwd / hp.sigma_forward]))])

@@ -191,8 +191,9 @@ def _server_pose(cam, frame: int, feet_xy, wrist_z: float) -> PlayerTracks:
 
 def test_a_raised_racket_hand_puts_the_hit_above_it():
     """A serve's hand is above the shoulders and the ball above the hand by about the racket (court YAML
-    ``hit_prior.raised_above_hand``); a groundstroke's hand is at the ball's height. The contact prior reads
-    the hand's height and whether it is raised from the pose; the fitted serve contact is the higher for it."""
+    ``hit_prior.raised_above_hand``) and in front of the body (``raised_forward``); a groundstroke's hand is at
+    the ball's height. The contact prior reads the hand's height and whether it is raised from the pose; the
+    fitted serve contact is nearer the truth for it."""
     court = load_court("tennis")
     xyz, hit, bnc = _far_serve(court)
     cam = Camera.from_look_at((5.5, -16.0, 6.0), (5.5, 14.0, 0.0), SIZE, fov_deg=50.0)
@@ -203,16 +204,21 @@ def test_a_raised_racket_hand_puts_the_hit_above_it():
         prior = contact_priors(obs)[0]
         assert prior.hand_raised is raised and prior.hand_z == pytest.approx(wrist_z, abs=0.05)
     uv[hit - 1:hit + 2] = np.nan                # the racket hides the ball around the hit: the prior matters
-    heights = {}
-    for above in (0.5, 0.0):
-        c = replace(court, extra={**court.extra, "hit_prior": {**court.extra["hit_prior"], "raised_above_hand": above}})
-        obs = Observations(c, cam, FPS, uv, np.array([hit, bnc]), ["player_far", "ground"],
-                           _server_pose(cam, hit, (5.1, 24.2), 2.35))
+    fitted = {}
+    for raised in (True, False):               # the court YAML's raised-hand prior, or the groundstroke's
+        hp = {**court.extra["hit_prior"]}
+        if not raised:
+            hp.pop("raised_forward")
+            hp["raised_above_hand"] = 0.0
+        obs = Observations(replace(court, extra={**court.extra, "hit_prior": hp}), cam, FPS, uv,
+                           np.array([hit, bnc]), ["player_far", "ground"], _server_pose(cam, hit, (5.1, 24.2), 2.35))
         b = fit_joint(obs, JointConfig()).ball_3d()
-        heights[above] = float(b.xyz[b.frame == hit, 2][0])
-    truth = float(xyz[hit, 2])
-    # the track pins most of it (2.842 vs 2.835 m, truth 2.907, the hit frames hidden); the prior moves it up
-    assert heights[0.0] < heights[0.5] < truth, (heights, truth)
+        fitted[raised] = b.xyz[b.frame == hit][0]
+    err = {k: np.abs(v - xyz[hit]) for k, v in fitted.items()}
+    # the serve is met 0.4 m in front of the server's feet and 0.55 m above the wrist (fitted 0.13 / 0.05 m off
+    # with the raised-hand prior, 0.17 / 0.07 m without it): along the court and in
+    # height the raised-hand prior lands nearer (the track pins the rest)
+    assert err[True][1] < err[False][1] and err[True][2] < err[False][2], err
 
 
 def _net_drop(court, fps: float = FPS) -> tuple[np.ndarray, list[int], list[str]]:
