@@ -127,8 +127,8 @@ def test_a_flight_sent_flying_by_a_wild_start_is_capped_and_the_covariance_holds
     """A flight that nothing pins along the line of sight (a run-out the first pass leaves free, with few or
     no 2D points) could fly off to 10⁸ m/s: its hinge rows then swamped the normal matrix and every frame's σ
     collapsed to the 1 mm floor (a held-out padel clip: 2-σ coverage 0.03). Every LM trial is projected to
-    speeds ≤ ``speed_cap``; from a start with the run-out at 10⁶ m/s the fit still ends with sane speeds and
-    σ's of centimetres."""
+    speeds ≤ ``speed_cap`` (1000 m/s: a guard, not physics); from a start with the run-out at 10⁶ m/s the fit
+    still ends with σ's of centimetres (the old code lost the whole clip from that start)."""
     from inference.reconstruct import joint
 
     init = joint._init_velocities
