@@ -629,7 +629,7 @@ class Problem:
             self._court(fl, taus, rows, through)
         self._net(fl, taus, rows, through)
         self._hits(theta, rows)
-        self._free_ends(theta, rows, fl, taus)
+        self._free_ends(theta, rows)
 
         # contact-time prior, spin and drag priors
         tau_idx = np.array([ct.tau for ct in ch.contacts])
@@ -669,12 +669,6 @@ class Problem:
         return (cfg.bounce_sigma_normal * vn + cfg.bounce_sigma_floor,
                 cfg.bounce_sigma_tangent * float(np.linalg.norm(v_in)) + cfg.bounce_sigma_floor)
 
-    @staticmethod
-    def _impacts(ct: Contact, inc) -> bool:
-        """Whether the impact model applies at contact ``ct`` with the incoming flight ``inc``
-        (:meth:`_incoming`): a floor/glass surface and a ball moving into it."""
-        return ct.material is not None and ct.normal is not None and inc is not None and inc[1] @ ct.normal <= -0.3
-
     def _bounces(self, theta, fl, taus, rows: _Rows, through) -> None:
         """The impact model at floor/glass contacts with flights on both sides."""
         ch, cfg = self.chain, self.cfg
@@ -685,8 +679,11 @@ class Problem:
                 continue
             out = [s for s, f in enumerate(ch.flights) if f.start == c and not f.lead_in]
             inc = self._incoming(theta, fl, taus, c)
-            if out and self._impacts(ct, inc):    # else not moving into the surface: nothing to model
-                todo.append((ct, out[0], inc))
+            if not out or inc is None:
+                continue
+            if inc[1] @ ct.normal > -0.3:      # not moving into the surface: nothing to model
+                continue
+            todo.append((ct, out[0], inc))
         if not todo:
             return
         # the impact model of every contact and its 6 perturbations (v_in, ω_in) in one call
@@ -842,22 +839,19 @@ class Problem:
                 rows.add(np.array([viol / cfg.limit_sigma]),
                          lambda idx=idx: [(idx[2:3][None, :], np.array([[1.0 / cfg.limit_sigma]]))])
 
-    def _free_ends(self, theta: np.ndarray, rows: _Rows, fl: Flights, taus: np.ndarray) -> None:
-        """Lead-ins, run-outs that the impact model does not tie to a floor/glass bounce, and flights leaving
-        the net or a mesh (rebounds the impact model leaves free): a heavy-tailed (Student-t) pull of the
-        velocity at the contact towards rest. The 2D track pins such a flight's motion across the line of
-        sight but hardly along it (a serve's toss seen from behind, a ball dropping off the net towards the
-        camera); a fast flight that the track does explain costs little. A run-out with no 2D point left free
-        flew off to 10⁸ m and its hinge rows swamped the normal matrix (every σ of the clip collapsed to 1 mm)."""
+    def _free_ends(self, theta: np.ndarray, rows: _Rows) -> None:
+        """Lead-ins, run-outs that do not leave a floor/glass bounce, and flights leaving the net or a mesh
+        (rebounds the impact model leaves free): a heavy-tailed (Student-t) pull of the velocity at the
+        contact towards rest. The 2D track pins such a flight's motion across the line of sight but hardly
+        along it (a serve's toss seen from behind, a ball dropping off the net towards the camera); a fast
+        flight that the track does explain costs little."""
         sig = self.cfg.free_end_speed_sigma
         if not sig:
             return
         for f in self.chain.flights:
             ct = self.chain.contacts[f.start]
-            if not f.lead_in and ct.material is not None and ct.normal is not None and (
-                    not self.physics or self._impacts(ct, self._incoming(theta, fl, taus, f.start))):
+            if not f.lead_in and ct.material is not None:
                 continue           # leaving a floor/glass bounce: the impact model ties it to its incoming
-                #                    (the first pass leaves it free: the restarts of seed_runouts follow)
             if f.end is not None and ct.kind == "hit":
                 continue           # between a hit and the next contact: both ends pin it
             idx = np.array(f.vel)
