@@ -261,4 +261,4 @@ def test_a_ball_dropping_off_the_net_keeps_its_bounce_and_dribble():
         whole += bool(np.isin(np.arange(len(xyz)), b.frame).all())
         err = np.linalg.norm(b.xyz - xyz[b.frame], axis=1)
         assert err.max() < 2.0 and b.xyz[:, 2].max() < 3.0, (k, err.max(), b.xyz[:, 2].max())
-    assert whole >= 6, whole
+    assert whole >= 5, whole                 # 6 here; a margin for other CPUs' rounding
