@@ -203,21 +203,23 @@ def test_a_raised_racket_hand_puts_the_hit_above_it():
                            _server_pose(cam, hit, (5.1, 24.2), wrist_z))
         prior = contact_priors(obs)[0]
         assert prior.hand_raised is raised and prior.hand_z == pytest.approx(wrist_z, abs=0.05)
-    uv[hit - 1:hit + 2] = np.nan                # the racket hides the ball around the hit: the prior matters
-    fitted = {}
-    for raised in (True, False):               # the court YAML's raised-hand prior, or the groundstroke's
-        hp = {**court.extra["hit_prior"]}
-        if not raised:
-            hp.pop("raised_forward")
-            hp["raised_above_hand"] = 0.0
-        obs = Observations(replace(court, extra={**court.extra, "hit_prior": hp}), cam, FPS, uv,
-                           np.array([hit, bnc]), ["player_far", "ground"], _server_pose(cam, hit, (5.1, 24.2), 2.35))
-        b = fit_joint(obs, JointConfig()).ball_3d()
-        fitted[raised] = b.xyz[b.frame == hit][0]
-    err = {k: np.abs(v - xyz[hit]) for k, v in fitted.items()}
-    # the serve is met 0.4 m in front of the server's feet and 0.55 m above the wrist (fitted 0.13 / 0.05 m off
-    # with the raised-hand prior, 0.17 / 0.07 m without it): along the court and in
-    # height the raised-hand prior lands nearer (the track pins the rest)
+    err = {True: np.zeros(3), False: np.zeros(3)}
+    for k in range(4):                          # 4 noise draws, the racket hiding the ball around the hit
+        uv = cam.project(xyz) + np.random.default_rng(k).normal(0.0, 2.0, (len(xyz), 2))
+        uv[hit - 1:hit + 2] = np.nan
+        for raised in (True, False):           # the court YAML's raised-hand prior, or the groundstroke's
+            hp = {**court.extra["hit_prior"]}
+            if not raised:
+                hp.pop("raised_forward")
+                hp["raised_above_hand"] = 0.0
+            obs = Observations(replace(court, extra={**court.extra, "hit_prior": hp}), cam, FPS, uv,
+                               np.array([hit, bnc]), ["player_far", "ground"],
+                               _server_pose(cam, hit, (5.1, 24.2), 2.35))
+            b = fit_joint(obs, JointConfig()).ball_3d()
+            err[raised] += np.abs(b.xyz[b.frame == hit][0] - xyz[hit]) / 4
+    # the serve is met 0.4 m in front of the server's feet and 0.55 m above the wrist: along the court and in
+    # height the raised-hand prior lands nearer on average (0.15 / 0.03 m against 0.19 / 0.04; the track pins
+    # the rest)
     assert err[True][1] < err[False][1] and err[True][2] < err[False][2], err
 
 
