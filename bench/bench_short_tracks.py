@@ -29,26 +29,9 @@ from inference.camera import Camera  # noqa: E402
 from inference.court import load_court  # noqa: E402
 from inference.reconstruct import Observations  # noqa: E402
 from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
-from training.synth.short_tracks import FPS, draw_tracks, hitter_players  # noqa: E402
+from training.synth.short_tracks import FPS, REACH, VIEWS, draw_tracks, hitter_players  # noqa: E402
 
 SIZE = (1280, 720)
-#: (eye, target, horizontal field of view) of the three views of each sport
-CAMERAS = {
-    "tennis": {
-        "side": ((-14.0, 11.9, 5.0), (5.5, 11.9, 0.0), 75.0),
-        "oblique": ((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), 60.0),
-        "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
-    },
-    # the table (1.525 x 2.74 m, top 0.76 m) seen from 3-4 m, as the motion-capture rooms film it
-    "table_tennis": {
-        "side": ((-4.0, 1.0, 1.8), (0.76, 1.0, 0.76), 65.0),
-        "oblique": ((-2.6, -2.0, 2.2), (0.76, 1.2, 0.76), 60.0),
-        "behind": ((0.76, -3.4, 2.0), (0.76, 1.6, 0.76), 50.0),
-    },
-}
-
-#: how far beside the ball the hitter's body is drawn (m): a tennis player reaches farther than a table-tennis one
-REACH = {"tennis": (0.4, 1.1), "table_tennis": (0.2, 0.7)}
 
 
 def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = None, sport: str = "tennis") -> None:
@@ -60,7 +43,7 @@ def run(n: int, seed: int, noise: tuple[float, float], hitter: float | None = No
           "3D median m | 3D mean per track m | frames/CPU-s |")
     print("|---|---|---|---|---|---|---|---|---|")
     cfg = JointConfig(pixel_sigma=float(np.mean(noise)))
-    for name, (eye, target, fov) in CAMERAS[sport].items():
+    for name, (eye, target, fov) in VIEWS[sport].items():
         cam = Camera.from_look_at(eye, target, SIZE, fov_deg=fov)
         kinds = ("hit + bounce", "bounce only") + ((f"hit + bounce + hitter ±{hitter:g} m",) if hitter is not None else ())
         for events in kinds:
@@ -109,7 +92,7 @@ def main() -> None:
     ap.add_argument("--noise", default="2,3", help="2D noise σ range in px (default 2,3)")
     ap.add_argument("--hitter", type=float, default=None,
                     help="also fit with the hitter's court position from players.csv, this noisy (m per axis)")
-    ap.add_argument("--sport", choices=sorted(CAMERAS), default="tennis",
+    ap.add_argument("--sport", choices=sorted(VIEWS), default="tennis",
                     help="court, ball, shots and cameras (conf/court/<sport>.yaml; default tennis)")
     args = ap.parse_args()
     lo, hi = (float(x) for x in args.noise.split(","))

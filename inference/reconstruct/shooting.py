@@ -914,7 +914,7 @@ class Problem:
             flagged.append((c, out[0], inc[0]))
         if not flagged:
             return None
-        cands = [self._rebound_runouts(theta.copy(), flagged)]
+        cands = [self._rebound_runouts(theta.copy(), flagged, fl)]
         if theta0 is not None:
             back = theta.copy()
             for c, _, s in flagged:
@@ -926,10 +926,10 @@ class Problem:
         best = int(np.argmin(costs))
         return cands[best - 1] if best else None
 
-    def _rebound_runouts(self, theta: np.ndarray, flagged: list) -> np.ndarray:
+    def _rebound_runouts(self, theta: np.ndarray, flagged: list, fl: Flights | None = None) -> np.ndarray:
         """θ with the run-outs of ``flagged`` (contact, run-out flight, incoming flight index) set to the
-        impact model's rebound of their incoming flight (at θ)."""
-        fl, taus = self.flights(theta, perturb=False), self.taus(theta)
+        impact model's rebound of their incoming flight (at θ; ``fl``: θ's flights when already integrated)."""
+        fl, taus = fl if fl is not None else self.flights(theta, perturb=False), self.taus(theta)
         for c, out, _ in flagged:
             ct = self.chain.contacts[c]
             inc = self._incoming(theta, fl, taus, c)

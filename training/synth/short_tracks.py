@@ -67,6 +67,24 @@ SHOTS: dict[str, Shots] = {
 }
 
 
+#: (eye, target, horizontal field of view) of the side, oblique and behind views of each sport's short
+#: tracks (``bench/bench_short_tracks.py`` and the short-track tests)
+VIEWS: dict[str, dict[str, tuple]] = {
+    "tennis": {
+        "side": ((-14.0, 11.9, 5.0), (5.5, 11.9, 0.0), 75.0),
+        "oblique": ((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), 60.0),
+        "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
+    },
+    # the table (1.525 x 2.74 m, top 0.76 m) seen from 3-4 m, as the motion-capture rooms film it
+    "table_tennis": {
+        "side": ((-4.0, 1.0, 1.8), (0.76, 1.0, 0.76), 65.0),
+        "oblique": ((-2.6, -2.0, 2.2), (0.76, 1.2, 0.76), 60.0),
+        "behind": ((0.76, -3.4, 2.0), (0.76, 1.6, 0.76), 50.0),
+    },
+}
+#: how far beside the ball the hitter's body is drawn (m): a tennis player reaches farther than a table-tennis one
+REACH = {"tennis": (0.4, 1.1), "table_tennis": (0.2, 0.7)}
+
 def simulate(rng: np.random.Generator, court: Court, model: FlightModel, fps: float = FPS,
              shots: Shots | None = None) -> dict | None:
     """One hit → bounce → a few frames, or None when the drawn shot fails (into the net, off the surface):

@@ -17,7 +17,7 @@ from inference.physics import FlightModel, bounce, integrate
 from inference.reconstruct import Observations
 from inference.reconstruct.joint import JointConfig, fit_joint
 from inference.reconstruct.observations import contact_priors
-from training.synth.short_tracks import FPS, draw_tracks, hitter_players
+from training.synth.short_tracks import FPS, VIEWS, draw_tracks, hitter_players
 
 SIZE = (1280, 720)
 
@@ -31,7 +31,8 @@ def tracks():
 @pytest.mark.parametrize("events", ["hit + bounce", "bounce only", "hit + bounce + hitter"])
 def test_every_short_track_is_reconstructed_from_behind(tracks, events):
     court, trs = tracks
-    cam = Camera.from_look_at((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), SIZE, fov_deg=45.0)
+    eye, target, fov = VIEWS["tennis"]["behind"]
+    cam = Camera.from_look_at(eye, target, SIZE, fov_deg=fov)
     along, across = [], []
     for k, tr in enumerate(trs):
         rng = np.random.default_rng(k)
@@ -51,17 +52,11 @@ def test_every_short_track_is_reconstructed_from_behind(tracks, events):
         a = np.einsum("ij,ij->i", d, ray)
         along.append(np.abs(a))
         across.append(np.linalg.norm(d - a[:, None] * ray, axis=1))
-    # measured 0.106 / 0.112 m along and 0.015 m across on 30 tracks (bench/bench_short_tracks.py)
     # 30 tracks (bench/bench_short_tracks.py): along 0.106 / 0.112 m, across 0.015 m; here per track 0.04–0.62
     assert np.median(np.concatenate(along)) < 0.5 and np.median(np.concatenate(across)) < 0.03
 
 
-#: the views of bench/bench_short_tracks.py --sport table_tennis: (eye, target, horizontal field of view)
-TT_VIEWS = {
-    "side": ((-4.0, 1.0, 1.8), (0.76, 1.0, 0.76), 65.0),
-    "oblique": ((-2.6, -2.0, 2.2), (0.76, 1.2, 0.76), 60.0),
-    "behind": ((0.76, -3.4, 2.0), (0.76, 1.6, 0.76), 50.0),
-}
+TT_VIEWS = VIEWS["table_tennis"]
 
 
 def _tt_tracks(seed: int, n: int):
@@ -108,7 +103,8 @@ def test_a_run_out_restarts_from_its_bounce_rebound():
     only event) had its run-out 34 m off before; the other tracks' worst frame is 1.6 m."""
     court = load_court("tennis")
     trs = draw_tracks(court, 17, 0)
-    cam = Camera.from_look_at((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), SIZE, fov_deg=60.0)
+    eye, target, fov = VIEWS["tennis"]["oblique"]
+    cam = Camera.from_look_at(eye, target, SIZE, fov_deg=fov)
     tr, r2 = trs[16], np.random.default_rng(16)
     uv = cam.project(tr["xyz"]) + r2.normal(0.0, r2.uniform(2.0, 3.0), (len(tr["xyz"]), 2))
     uv[~((uv >= 0) & (uv < SIZE)).all(axis=1)] = np.nan
@@ -121,27 +117,44 @@ def test_a_run_out_restarts_from_its_bounce_rebound():
     assert np.all(np.diff(b.xyz[run_out, 1]) > 0)                   # still going away, towards the far baseline
 
 
+DT = 1.0 / 1000.0      # s, the integration step of the hand-made tracks below
+
+
+def _floor_bounce(court, flight, seconds: float):
+    """The sample index where ``flight`` (FlightSamples) first reaches the floor, and the flight after its
+    rebound (the court's floor material) integrated for ``seconds``."""
+    r = court.ball.radius
+    k = int(np.flatnonzero(flight.pos[:, 0, 2] <= r)[0])
+    mat = court.materials[court.planes_for("ground")[0].material]
+    v_out, w_out = bounce(flight.vel[k], flight.spin[k], np.array([0.0, 0.0, 1.0]), mat.restitution, mat.friction, r)
+    after = integrate(flight.pos[k, 0] * [1, 1, 0] + [0, 0, r], v_out[0], w_out[0], seconds,
+                      FlightModel.from_ball(court.ball), DT)
+    return k, after
+
+
+def _stitch(pieces: list, n: int, fps: float) -> np.ndarray:
+    """(n, 3) positions at frames 0 … n−1 of consecutive flights ``[(FlightSamples, seconds it lasts), …]``
+    (the last one lasts to the end)."""
+    pos = np.empty((n, 3))
+    for i in range(n):
+        t = i / fps
+        for k, (flight, length) in enumerate(pieces):
+            if k == len(pieces) - 1 or t <= length:
+                pos[i] = flight.pos[int(round(t / DT)), 0]
+                break
+            t -= length
+    return pos
+
+
 def _far_serve(court, fps: float = FPS) -> tuple[np.ndarray, int, int]:
     """A serve from the far baseline: a 12-frame toss (up 4.5 m/s from 1.9 m), the hit at 2.9 m, the ball into
     the near service box and 6 frames after its bounce. Returns (xyz (n, 3), hit frame, bounce frame)."""
     model = FlightModel.from_ball(court.ball)
-    dt, r = 1.0 / 1000.0, court.ball.radius
     hit_frame = 12
-    toss = integrate(np.array([4.9, 23.9, 1.9]), np.array([0.0, -0.2, 4.5]), np.zeros(3), hit_frame / fps, model, dt)
-    p_hit = toss.pos[-1, 0]
-    serve = integrate(p_hit, np.array([-1.5, -38.0, -4.0]), np.array([-250.0, 0.0, 0.0]), 1.5, model, dt)
-    k = int(np.flatnonzero(serve.pos[:, 0, 2] <= r)[0])
-    v_out, w_out = bounce(serve.vel[k], serve.spin[k], np.array([0.0, 0.0, 1.0]), 0.75, 0.6, r)
-    after = integrate(serve.pos[k, 0] * [1, 1, 0] + [0, 0, r], v_out[0], w_out[0], 0.5, model, dt)
-    t = np.arange(0, hit_frame + int(serve.t[k] * fps) + 7) / fps
-    pos = np.empty((len(t), 3))
-    for i, ti in enumerate(t):
-        if ti <= toss.t[-1]:
-            pos[i] = toss.pos[int(round(ti / dt)), 0]
-        elif ti - toss.t[-1] <= serve.t[k]:
-            pos[i] = serve.pos[int(round((ti - toss.t[-1]) / dt)), 0]
-        else:
-            pos[i] = after.pos[int(round((ti - toss.t[-1] - serve.t[k]) / dt)), 0]
+    toss = integrate(np.array([4.9, 23.9, 1.9]), np.array([0.0, -0.2, 4.5]), np.zeros(3), hit_frame / fps, model, DT)
+    serve = integrate(toss.pos[-1, 0], np.array([-1.5, -38.0, -4.0]), np.array([-250.0, 0.0, 0.0]), 1.5, model, DT)
+    k, after = _floor_bounce(court, serve, 0.5)
+    pos = _stitch([(toss, toss.t[-1]), (serve, serve.t[k]), (after, None)], hit_frame + int(serve.t[k] * fps) + 7, fps)
     return pos, hit_frame, hit_frame + int(round(serve.t[k] * fps))
 
 
@@ -228,22 +241,16 @@ def _net_drop(court, fps: float = FPS) -> tuple[np.ndarray, list[int], list[str]
     hitter), bounces on the near side and dribbles for 11 frames. Returns (xyz (n, 3), event frames, labels)."""
     from scipy.optimize import least_squares
 
-    model, r, dt = FlightModel.from_ball(court.ball), court.ball.radius, 1.0 / 1000.0
+    model, r = FlightModel.from_ball(court.ball), court.ball.radius
     p0, target, T = np.array([4.85, -0.6, 1.3]), np.array([5.6, court.net_y - r, 0.45]), 18.4 / fps
-    v0 = least_squares(lambda v: integrate(p0, v, np.zeros(3), T, model, dt).pos[-1, 0] - target,
+    v0 = least_squares(lambda v: integrate(p0, v, np.zeros(3), T, model, DT).pos[-1, 0] - target,
                        np.array([0.5, 17.0, 2.0])).x
-    to_net = integrate(p0, v0, np.zeros(3), T, model, dt)
-    drop = integrate(target, np.array([0.4, -1.5, -1.0]), np.zeros(3), 1.0, model, dt)
-    k = int(np.flatnonzero(drop.pos[:, 0, 2] <= r)[0])
-    mat = court.materials[court.planes_for("ground")[0].material]
-    v_out, w_out = bounce(drop.vel[k], drop.spin[k], np.array([0.0, 0.0, 1.0]), mat.restitution, mat.friction, r)
-    dribble = integrate(drop.pos[k, 0] * [1, 1, 0] + [0, 0, r], v_out[0], w_out[0], 1.0, model, dt)
+    to_net = integrate(p0, v0, np.zeros(3), T, model, DT)
+    drop = integrate(target, np.array([0.4, -1.5, -1.0]), np.zeros(3), 1.0, model, DT)
+    k, dribble = _floor_bounce(court, drop, 1.0)
     t_b = drop.t[k]
-    pos = []
-    for t in np.arange(int((T + t_b) * fps) + 12) / fps:
-        s, u = (to_net, t) if t <= T else (drop, t - T) if t - T <= t_b else (dribble, t - T - t_b)
-        pos.append(s.pos[int(round(u / dt)), 0])
-    return np.array(pos), [0, int(round(T * fps)), int(round((T + t_b) * fps))], ["player_near", "net", "ground"]
+    pos = _stitch([(to_net, T), (drop, t_b), (dribble, None)], int((T + t_b) * fps) + 12, fps)
+    return pos, [0, int(round(T * fps)), int(round((T + t_b) * fps))], ["player_near", "net", "ground"]
 
 
 def test_a_ball_dropping_off_the_net_keeps_its_bounce_and_dribble():
