@@ -49,6 +49,9 @@ class FeatureConfig:
         players: players on court (informative; the ``poses`` block always has one slot per side).
         velocity_scale: multiplies the per-frame displacement (normalised units) of ``vx, vy``.
         rel_scale: multiplies image offsets from the ball (body, wrist) in the ``poses`` block.
+        fill_holes_s: holes in the track of at most this long (s; the frames a detector drops now and then,
+            shorter than the gaps at contacts) are filled linearly between their two seen neighbours, which
+            then count as seen (0: none).
     """
 
     ref_fps: float | None = 50.0
@@ -58,10 +61,13 @@ class FeatureConfig:
     players: int = 4
     velocity_scale: float = 10.0
     rel_scale: float = 10.0
+    fill_holes_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.ref_fps is not None and self.ref_fps <= 0:
             raise ValueError(f"ref_fps must be > 0, got {self.ref_fps}")
+        if not 0.0 <= self.fill_holes_s <= 0.5:
+            raise ValueError(f"fill_holes_s must be within 0–0.5 s (short holes, not gaps), got {self.fill_holes_s}")
 
     @classmethod
     def from_dict(cls, d) -> FeatureConfig:
@@ -69,7 +75,7 @@ class FeatureConfig:
             return d
         d = dict(d or {})
         return cls(**{k: d[k] for k in ("ref_fps", "velocity", "corners", "poses", "players", "velocity_scale",
-                                        "rel_scale") if k in d})
+                                        "rel_scale", "fill_holes_s") if k in d})
 
     @classmethod
     def from_model_file(cls, d) -> FeatureConfig:
@@ -83,7 +89,8 @@ class FeatureConfig:
     def to_dict(self) -> dict:
         return {"ref_fps": self.ref_fps, "velocity": self.velocity, "corners": self.corners,
                 "poses": self.poses, "players": self.players, "velocity_scale": self.velocity_scale,
-                "rel_scale": self.rel_scale, **({"pose_layout": POSE_LAYOUT} if self.poses else {})}
+                "rel_scale": self.rel_scale, "fill_holes_s": self.fill_holes_s,
+                **({"pose_layout": POSE_LAYOUT} if self.poses else {})}
 
     @property
     def n_player_features(self) -> int:
@@ -106,6 +113,26 @@ def dense_xy(ball: BallTrack, n_frames: int) -> np.ndarray:
     xy = d.xy.copy()
     xy[d.visibility <= 0] = np.nan
     return xy
+
+
+def fill_holes(xy: np.ndarray, max_frames: int) -> np.ndarray:
+    """``(T, 2)`` positions (NaN missing) with every run of at most ``max_frames`` missing frames between two
+    seen ones filled linearly; longer gaps and the ends stay missing."""
+    out = np.array(xy, dtype=float, copy=True)
+    if max_frames <= 0:
+        return out
+    seen = np.flatnonzero(np.isfinite(out).all(axis=1))
+    for a, b in zip(seen[:-1], seen[1:]):
+        if 1 < b - a <= max_frames + 1:
+            w = ((np.arange(a + 1, b) - a) / (b - a))[:, None]
+            out[a + 1:b] = out[a] * (1 - w) + out[b] * w
+    return out
+
+
+def track_xy(ball: BallTrack, n_frames: int, fps: float, config: FeatureConfig) -> np.ndarray:
+    """``(n_frames, 2)`` the positions the features read: :func:`dense_xy` with the holes of at most
+    ``config.fill_holes_s`` filled (:func:`fill_holes`)."""
+    return fill_holes(dense_xy(ball, n_frames), int(np.floor(config.fill_holes_s * fps + 1e-6)))
 
 
 def resample_xy(xy: np.ndarray, fps: float, ref_fps: float | None) -> np.ndarray:
@@ -292,12 +319,13 @@ def player_features(players: PlayerTracks | None, ball_xy: np.ndarray, court=Non
 def clip_features(ball: BallTrack, n_frames: int, fps: float, config: FeatureConfig, *, camera=None,
                   court=None, players: PlayerTracks | None = None) -> np.ndarray:
     """``(T', F)`` features of a clip at the reference rate (``F = config.n_features``)."""
-    xy = resample_xy(dense_xy(ball, n_frames), fps, config.ref_fps)
+    native_xy = track_xy(ball, n_frames, fps, config)
+    xy = resample_xy(native_xy, fps, config.ref_fps)
     parts = [ball_features(xy, config.velocity, config.velocity_scale)]
     if config.corners:
         parts.append(court_corner_features(camera, court, len(xy)))
     if config.poses:
-        native = player_features(players, dense_xy(ball, n_frames), court, config.rel_scale)
+        native = player_features(players, native_xy, court, config.rel_scale)
         src = np.clip(np.round(np.arange(len(xy)) * fps / (config.ref_fps or fps)).astype(int), 0, n_frames - 1)
         parts.append(native[src])
     feats = np.concatenate(parts, axis=1).astype(np.float32)

@@ -166,7 +166,8 @@ def init_events(module, path: str | Path, dm: EventDataModule | None = None) -> 
                   "data.class_set": blob["class_set"].get("name")}
         have = {"data.window": dm.window, "data.last_k": dm.last_k, "data.lookahead": dm.lookahead,
                 "data.class_set": dm.class_set.name}
-        skip = {"poses", "rel_scale"} if widen else set()  # rel_scale only scales the players block
+        # rel_scale only scales the players block; filling short holes is preprocessing the weights do not depend on
+        skip = ({"poses", "rel_scale"} if widen else set()) | {"fill_holes_s"}
         feats = file_feats.to_dict()
         wanted.update({f"data.features.{k}": v for k, v in feats.items() if k not in skip})
         have.update({f"data.features.{k}": v for k, v in dm.features.to_dict().items() if k not in skip})
