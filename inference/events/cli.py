@@ -13,7 +13,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "detect) and writes events.csv with fine-grained labels. Grouped classes (padel ground_or_other_wall) "
         "are resolved to their surface with the clip's camera.yaml when present, else written as `ground`. "
         "Default model: the shipped one of the clip's sport (inference/weights/hitnet_<sport>.pth.tar), or its "
-        "player-aware one (hitnet_<sport>_players.pth.tar) when the clip has players.csv and that model is shipped.",
+        "player-aware one (hitnet_<sport>_players.pth.tar) when the clip has players.csv and that model is shipped "
+        "(tennis: with or without players.csv, it beats the ball-only model either way).",
     )
     p.add_argument("clip", type=Path)
     p.add_argument("--weights", type=Path, help="a hit-event model file; default: the shipped one")

@@ -52,6 +52,9 @@ DEFAULT_WEIGHTS = {"padel": "hitnet_padel.pth.tar", "tennis": "hitnet_tennis.pth
 #: Player-aware models (``features.poses``), used by default when the clip has players; shipped only where
 #: they beat the ball-only model (docs/events.md): a sport without a file here falls back to the ball-only one.
 PLAYER_WEIGHTS = {"padel": "hitnet_padel_players.pth.tar", "tennis": "hitnet_tennis_players.pth.tar"}
+#: Sports whose player-aware model also beats the ball-only one on clips without players (it was trained with
+#: 10 % of its clips without any): their player-aware model is the default either way (docs/events.md).
+PLAYERS_OPTIONAL = frozenset({"tennis"})
 KINDS = ("hitnet", "physics", "crop")
 
 
@@ -95,10 +98,12 @@ def has_players(players: PlayerTracks | None) -> bool:
 
 def choose_weights(path: str | Path | None, sport: str, players: PlayerTracks | None = None) -> Path:
     """The model file to use: ``path`` when given; else the shipped player-aware model of ``sport`` when
-    ``players`` has rows and such a model is shipped; else the shipped ball-only model."""
+    ``players`` has rows (or the sport is in :data:`PLAYERS_OPTIONAL`) and such a model is shipped; else the
+    shipped ball-only model."""
     if path is not None:
         return Path(path)
-    if has_players(players) and sport in PLAYER_WEIGHTS and (WEIGHTS_DIR / PLAYER_WEIGHTS[sport]).is_file():
+    wanted = has_players(players) or sport in PLAYERS_OPTIONAL
+    if wanted and sport in PLAYER_WEIGHTS and (WEIGHTS_DIR / PLAYER_WEIGHTS[sport]).is_file():
         return WEIGHTS_DIR / PLAYER_WEIGHTS[sport]
     return default_weights(sport)
 
@@ -263,9 +268,14 @@ class EventDetector:
             n_frames = len(frames) if frames is not None and hasattr(frames, "__len__") else (
                 int(ball.frame[-1]) + 1 if len(ball) else 0)
         if self.wants_players and not has_players(players):
-            log.warning("this hit-event model reads the players but none were given (players.csv): it runs on "
-                        "the ball alone, as it was trained to when players are missing; a ball-only model "
-                        "(the default without players) may do better")
+            if self.class_set.sport in PLAYERS_OPTIONAL:
+                log.info("no players given (players.csv): the player-aware model runs on the ball alone, as it "
+                         "was trained to when players are missing (for %s it beats the ball-only model either way)",
+                         self.class_set.sport)
+            else:
+                log.warning("this hit-event model reads the players but none were given (players.csv): it runs on "
+                            "the ball alone, as it was trained to when players are missing; a ball-only model "
+                            "(the default without players) may do better")
         C = self.class_set.n
         if n_frames == 0 or not np.any(ball.visibility > 0):
             warnings.warn("the ball track has no visible ball: no events can be detected", stacklevel=2)

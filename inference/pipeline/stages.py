@@ -358,7 +358,8 @@ def _players_for_events(ctx: Context):
 
 def _events_weights(ctx: Context) -> Path:
     """The hit-event model file the stage will load (so a new shipped model invalidates the cache): ``--events``,
-    else the shipped player-aware model when players were found and one is shipped, else the ball-only one."""
+    else the shipped player-aware model when players were found (tennis: always) and one is shipped, else the
+    ball-only one."""
     from inference.events.detector import choose_weights
 
     return choose_weights(ctx.cfg.events, ctx.clip.info.sport, _players_for_events(ctx))

@@ -15,7 +15,7 @@ from inference.court import load_court
 from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet
 from inference.events.features import PLAYER_COLUMNS, clip_features, player_features, racket_hand
 from inference.events.metrics import EventCounts
-from training.events.simulate import simulate_clip
+from training.events.simulate import simulate_clip, simulate_clips
 
 COL = {n: i for i, n in enumerate(PLAYER_COLUMNS)}
 P = len(PLAYER_COLUMNS)
@@ -167,9 +167,38 @@ def test_choose_weights_prefers_a_shipped_player_model_only_with_players(tennis,
     assert mod.choose_weights(None, "tennis", tennis.players).name == mod.DEFAULT_WEIGHTS["tennis"]  # none shipped
     (tmp_path / mod.PLAYER_WEIGHTS["tennis"]).write_bytes(b"x")
     assert mod.choose_weights(None, "tennis", tennis.players).name == mod.PLAYER_WEIGHTS["tennis"]
-    assert mod.choose_weights(None, "tennis", PlayerTracks.empty()).name == mod.DEFAULT_WEIGHTS["tennis"]
-    assert mod.choose_weights(None, "tennis", None).name == mod.DEFAULT_WEIGHTS["tennis"]
     assert mod.choose_weights(tmp_path / "mine.pth.tar", "tennis", tennis.players).name == "mine.pth.tar"
+    # without players: padel falls back to its ball-only model, tennis keeps the player-aware one (it wins there too)
+    (tmp_path / mod.DEFAULT_WEIGHTS["padel"]).write_bytes(b"x")
+    (tmp_path / mod.PLAYER_WEIGHTS["padel"]).write_bytes(b"x")
+    assert mod.choose_weights(None, "padel", tennis.players).name == mod.PLAYER_WEIGHTS["padel"]
+    assert mod.choose_weights(None, "padel", PlayerTracks.empty()).name == mod.DEFAULT_WEIGHTS["padel"]
+    assert mod.choose_weights(None, "padel", None).name == mod.DEFAULT_WEIGHTS["padel"]
+    assert mod.choose_weights(None, "tennis", PlayerTracks.empty()).name == mod.PLAYER_WEIGHTS["tennis"]
+    assert mod.choose_weights(None, "tennis", None).name == mod.PLAYER_WEIGHTS["tennis"]
+    monkeypatch.setattr(mod, "PLAYERS_OPTIONAL", frozenset())
+    assert mod.choose_weights(None, "tennis", None).name == mod.DEFAULT_WEIGHTS["tennis"]
+
+
+def test_the_shipped_tennis_player_model_beats_the_ball_only_one_without_players():
+    """Why tennis keeps its player-aware model without players: on held-out rallies with a degraded track and no
+    players.csv it finds more of the events than the ball-only model."""
+    from inference.events import detector as mod
+    from inference.events.metrics import EventCounts, tolerance_frames
+    from training.events.degrade import DegradeConfig, degrade_all
+
+    clips = simulate_clips("tennis", 6, seed=6262, progress=False, fps=50.0)
+    tracks = degrade_all(clips, 3, DegradeConfig(p_clean=0.0, integer_px=True, far_miss=0.3))
+    f1 = {}
+    for name, path in (("players", mod.WEIGHTS_DIR / mod.PLAYER_WEIGHTS["tennis"]), ("ball", mod.default_weights("tennis"))):
+        det = EventDetector.from_checkpoint(path)
+        counts = EventCounts(det.class_set.classes)
+        for c, tr in zip(clips, tracks):
+            r = det.predict(tr, c.fps, c.width, c.height, n_frames=c.n_frames, players=None)
+            counts.add(c.events.frame, [det.class_set.encode_label(str(e)) or 0 for e in c.events.event],
+                       r.events.frame, [det.class_set.index(x) for x in r.coarse], tolerance_frames(c.fps))
+        f1[name] = counts.scores()["f1"]
+    assert f1["players"] > f1["ball"] + 0.05, f1
 
 
 def test_the_shipped_player_aware_tennis_model_reads_players(tennis):
