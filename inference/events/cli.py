@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from inference.clipio import Clip, FormatError, read_ball_csv, write_events_csv
 
-    from .detector import EventDetector, choose_weights
+    from .detector import PLAYERS_OPTIONAL, EventDetector, choose_weights
 
     clip = Clip(args.clip)
     info = clip.info
@@ -68,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
     model = f"player-aware model, players of {len(players.ids())} tracks" if det.wants_players and players \
-        else "ball-only model" if not det.wants_players else "player-aware model WITHOUT players"
+        else "ball-only model" if not det.wants_players else (
+            f"player-aware model without players ({info.sport}'s default either way)"
+            if args.weights is None and info.sport in PLAYERS_OPTIONAL else "player-aware model WITHOUT players")
     print(f"{clip.root.name}: {model}; {len(result.events)} events {counts}; "
           f"{rally_summary(result.rally, info.fps, result.outside.event, not args.rally_only)}; wrote {path} "
           f"and {rally_path}")

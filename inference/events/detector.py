@@ -270,7 +270,7 @@ class EventDetector:
         if self.wants_players and not has_players(players):
             if self.class_set.sport in PLAYERS_OPTIONAL:
                 log.info("no players given (players.csv): the player-aware model runs on the ball alone, as it "
-                         "was trained to when players are missing (for %s it beats the ball-only model either way)",
+                         "was trained to when players are missing (the shipped %s model beats the ball-only one so)",
                          self.class_set.sport)
             else:
                 log.warning("this hit-event model reads the players but none were given (players.csv): it runs on "

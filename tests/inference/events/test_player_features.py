@@ -148,8 +148,15 @@ def test_player_aware_model_file_records_its_features_and_reads_players(tennis, 
     assert loaded.wants_players and loaded.features == fc
     c = tennis
     with_p = loaded.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)
-    with caplog.at_level(logging.WARNING, logger="inference.events.detector"):
+    with caplog.at_level(logging.INFO, logger="inference.events.detector"):
         without = loaded.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames)
+    # tennis: said, not warned (its player-aware model is the default without players too); other sports: warned
+    assert "no players given" in caplog.text and not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    caplog.clear()
+    pd = EventDetector("hitnet", ClassSet.load("padel6"), fc, DecodeParams(), net=HitNet(fc.n_features, 6, 8, 1),
+                       window=12)
+    with caplog.at_level(logging.WARNING, logger="inference.events.detector"):
+        pd.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames)
     assert "reads the players but none were given" in caplog.text
     assert with_p.probs.shape == without.probs.shape and not np.allclose(with_p.probs, without.probs)
     # a file of the first poses layout (raw keypoints) is refused with the fix

@@ -11,7 +11,7 @@ import torch
 
 from inference.cli import main
 from inference.clipio import Clip
-from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet
+from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet, default_weights
 from inference.pipeline.stages import build_stages
 
 
@@ -63,7 +63,8 @@ def test_infer_feeds_players_to_a_player_aware_model(tennis_clip, player_model, 
     (clip / "players.csv").write_text("\n".join(pl[:1] + pl[1::2]) + "\n")  # every other row gone
     assert main([*args, "--events", str(player_model)]) == 0
     assert re.search(r"^events\s+done", capsys.readouterr().out, re.M)
-    # without players.csv the same model runs on the ball alone, and the default is the ball-only model
+    # without players.csv the same model runs on the ball alone; tennis's default is its shipped player-aware
+    # model then too (it beats the ball-only one without players; padel falls back: test_player_features.py)
     bare = _fresh(tennis_clip, tmp_path / "without", players=False)
     args = ["infer", str(bare), "--only", "players,events", "--pose", "none", "--no-progress"]
     assert main([*args, "--events", str(player_model)]) == 0
@@ -71,6 +72,8 @@ def test_infer_feeds_players_to_a_player_aware_model(tennis_clip, player_model, 
     without = Clip(bare).read_events()
     assert len(with_players) and len(without)
     assert main([*args, "--overwrite"]) == 0
+    assert re.search(r"^events\s+done.*; player-aware, no players\)", capsys.readouterr().out, re.M)
+    assert main([*args, "--overwrite", "--events", str(default_weights("tennis"))]) == 0
     assert re.search(r"^events\s+done.*; ball only\)", capsys.readouterr().out, re.M)
     # with players and no --events, tennis uses the shipped player-aware model
     shutil.copy(bare / "gt" / "players.csv", bare / "players.csv")
@@ -87,8 +90,8 @@ def test_events_command_reads_players(tennis_clip, player_model, tmp_path, capsy
     a = out.read_text()
     assert main(["events", str(clip), "--weights", str(player_model), "--out", str(out), "--no-players"]) == 0
     assert "player-aware model WITHOUT players" in capsys.readouterr().out
-    assert main(["events", str(clip), "--out", str(out)]) == 0  # no players.csv: the shipped ball-only model
-    assert "ball-only model" in capsys.readouterr().out
+    assert main(["events", str(clip), "--out", str(out)]) == 0  # no players.csv: tennis keeps its player-aware model
+    assert "player-aware model without players (tennis's default either way)" in capsys.readouterr().out
     assert a.startswith("frame")
     assert main(["events", str(clip), "--players", str(tmp_path / "nothing.csv"), "--out", str(out)]) != 0
     err = capsys.readouterr().err
