@@ -67,10 +67,14 @@ def run(args: argparse.Namespace) -> int:
     counts = {}
     for e in result.events.event:
         counts[str(e)] = counts.get(str(e), 0) + 1
-    model = f"player-aware model, players of {len(players.ids())} tracks" if det.wants_players and players \
-        else "ball-only model" if not det.wants_players else (
-            f"player-aware model without players ({info.sport}'s default either way)"
-            if args.weights is None and info.sport in PLAYERS_OPTIONAL else "player-aware model WITHOUT players")
+    if not det.wants_players:
+        model = "ball-only model"
+    elif players:
+        model = f"player-aware model, players of {len(players.ids())} tracks"
+    elif args.weights is None and info.sport in PLAYERS_OPTIONAL:
+        model = f"player-aware model without players ({info.sport}'s default either way)"
+    else:
+        model = "player-aware model WITHOUT players"
     print(f"{clip.root.name}: {model}; {len(result.events)} events {counts}; "
           f"{rally_summary(result.rally, info.fps, result.outside.event, not args.rally_only)}; wrote {path} "
           f"and {rally_path}")

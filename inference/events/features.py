@@ -119,13 +119,14 @@ def fill_holes(xy: np.ndarray, max_frames: int) -> np.ndarray:
     """``(T, 2)`` positions (NaN missing) with every run of at most ``max_frames`` missing frames between two
     seen ones filled linearly; longer gaps and the ends stay missing."""
     out = np.array(xy, dtype=float, copy=True)
-    if max_frames <= 0:
+    seen = np.isfinite(out).all(axis=1)
+    if max_frames <= 0 or seen.sum() < 2:
         return out
-    seen = np.flatnonzero(np.isfinite(out).all(axis=1))
-    for a, b in zip(seen[:-1], seen[1:]):
-        if 1 < b - a <= max_frames + 1:
-            w = ((np.arange(a + 1, b) - a) / (b - a))[:, None]
-            out[a + 1:b] = out[a] * (1 - w) + out[b] * w
+    t, n = np.arange(len(out)), len(out)
+    before = np.maximum.accumulate(np.where(seen, t, -1))             # last seen frame at or before each frame
+    after = np.minimum.accumulate(np.where(seen, t, n)[::-1])[::-1]   # first seen frame at or after it
+    short = ~seen & (before >= 0) & (after < n) & (after - before - 1 <= max_frames)
+    out[short] = _fill_ball(out)[short]
     return out
 
 
