@@ -20,6 +20,7 @@ _EXPORTS = {
     "format_event_table": ".metrics",
     "tolerance_frames": ".metrics",
     "HitNet": ".network",
+    "EventTagger": ".network",
     "PhysicsParams": ".physics",
 }
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
@@ -31,6 +32,7 @@ __all__ = [
     "EventCounts",
     "EventDetector",
     "EventResult",
+    "EventTagger",
     "FeatureConfig",
     "HitNet",
     "PhysicsParams",

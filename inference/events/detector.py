@@ -40,7 +40,7 @@ from .features import (
     window_probs_to_frames,
 )
 from .gaps import bridge_events
-from .network import HitNet
+from .network import EventTagger, HitNet
 from .physics import PhysicsParams, physics_probs
 from .rally import CourtSides, RallyParams, RallySegment, segment_rally
 
@@ -55,7 +55,7 @@ PLAYER_WEIGHTS = {"padel": "hitnet_padel_players.pth.tar", "tennis": "hitnet_ten
 #: Sports whose player-aware model also beats the ball-only one on clips without players (it was trained with
 #: 10 % of its clips without any): their player-aware model is the default either way (docs/events.md).
 PLAYERS_OPTIONAL = frozenset({"tennis"})
-KINDS = ("hitnet", "physics", "crop")
+KINDS = ("hitnet", "physics", "crop", "tagger")
 
 
 @dataclass
@@ -135,13 +135,14 @@ def load_model_file(path: str | Path) -> dict[str, Any]:
 
 
 class EventDetector:
-    """Hit events from a ball track with a HitNet or the physics-aware detector, then the decoder.
+    """Hit events from a ball track with a HitNet, an event tagger or the physics-aware detector, then the decoder.
 
     Args:
-        kind: ``hitnet`` or ``physics``.
+        kind: ``hitnet``, ``tagger``, ``crop`` or ``physics``.
         class_set, features, decode_params: see their classes.
-        net: the HitNet (``kind == 'hitnet'``); window, last_k, lookahead: its window length, label block
-            and the frames after the block (:func:`~.features.window_labels`).
+        net: the HitNet (``kind == 'hitnet'``: window, last_k, lookahead are its window length, label block
+            and the frames after the block, :func:`~.features.window_labels`) or the :class:`EventTagger`
+            (``kind == 'tagger'``: the whole clip at once, no windows).
         physics: parameters of the physics detector.
         meta: free-form provenance (training data, metrics).
     """
@@ -151,7 +152,7 @@ class EventDetector:
                  lookahead: int = 0, physics: PhysicsParams | None = None, meta: dict | None = None, crop=None):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-        if kind in ("hitnet", "crop") and net is None:
+        if kind in ("hitnet", "crop", "tagger") and net is None:
             raise ValueError(f"a {kind} detector needs its network")
         check_label_block(window, last_k, lookahead)
         self.kind, self.class_set, self.features, self.decode_params = kind, class_set, features, decode_params
@@ -174,8 +175,8 @@ class EventDetector:
         class_set = ClassSet.from_dict(blob["class_set"])
         features = FeatureConfig.from_model_file(blob["features"])
         net = None
-        if blob["kind"] == "hitnet":
-            net = HitNet(**blob["net"])
+        if blob["kind"] in ("hitnet", "tagger"):
+            net = (HitNet if blob["kind"] == "hitnet" else EventTagger)(**blob["net"])
             net.load_state_dict(blob["state_dict"])
         crop = None
         if blob["kind"] == "crop":
@@ -223,6 +224,8 @@ class EventDetector:
             xy = resample_xy(dense_xy(ball, n_frames), fps, self.ref_fps)
             return physics_probs(xy, self.class_set, self.physics, camera=camera, court=self.court)
         feats = clip_features(ball, n_frames, fps, self.features, camera=camera, court=self.court, players=players)
+        if self.kind == "tagger":
+            return self.net.probs(torch.from_numpy(feats)).numpy().astype(np.float64)
         if self.kind == "crop":
             from .crop import extract_crops
 

@@ -244,7 +244,8 @@ def player_offset_columns(features: FeatureConfig) -> tuple[list[tuple[int, int]
 
 def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg: AugmentConfig,
                   mirror_perm: torch.Tensor, gen: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Augment ``(B, W, F)`` windows and their labels ``(B,)`` (see :class:`AugmentConfig`)."""
+    """Augment ``(B, W, F)`` windows and their labels ``(B,)``, or crops and their per-frame labels ``(B, W)``
+    (see :class:`AugmentConfig`)."""
     if not cfg.enabled or len(x) == 0:
         return x, y
     x = x.clone()
@@ -274,7 +275,8 @@ def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg
         x[:, :, [cx, cy]] = torch.einsum("bij,bwj->bwi", A, x[:, :, [cx, cy]])
     if court_x:  # a mirrored image is the court seen mirrored
         x[:, :, court_x] = torch.where(mirror[:, None, None], -x[:, :, court_x], x[:, :, court_x])
-    y = torch.where(mirror, mirror_perm[y], y)
+    m = mirror.view(-1, *([1] * (y.dim() - 1)))  # y: (B,) window labels or (B, T) per-frame (negative: ignored)
+    y = torch.where(m & (y >= 0), mirror_perm[y.clamp(min=0)], y)
     # drops and corruptions of the ball columns (vectorised: a (B, W) mask of affected frames)
     names = [OPS[int(o)] for o in op]
     is_block = torch.tensor([any(n.endswith("block") for n in ns) for ns in names])
@@ -296,7 +298,8 @@ def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg
 
 # -------------------------------------------------------------------------------------- data module
 class EventDataModule(L.LightningDataModule):
-    """Windows for HitNet training (see the module docstring for the sources).
+    """Windows for HitNet training, or crops of whole clips for the event tagger (``sequence``; see the
+    module docstring for the sources).
 
     Args:
         sport, class_set: the class set (name or dict); features: :class:`FeatureConfig` fields.
@@ -315,6 +318,10 @@ class EventDataModule(L.LightningDataModule):
         pose_noise: :class:`~training.events.pose_noise.PoseNoiseConfig` fields: with ``features.poses``,
             the players as a pose backend gives them (misses, jitter, swaps; a new draw each epoch for
             training, a fixed one for val and test); None or ``enabled: false`` keeps them exact.
+        sequence: 0 (HitNet's windows) or the crop length in reference frames of the event tagger's
+            examples (:class:`~training.events.tagger.SequenceSet`: ``sequence_repeats`` random crops per
+            training clip and epoch, events spread over ± ``sequence_radius`` frames); ``batch_size`` then
+            counts crops.
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
@@ -324,7 +331,8 @@ class EventDataModule(L.LightningDataModule):
                  on_unmapped: str = "error", neg_ratio: float = 1.0, batch_size: int = 256,
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
                  degrade: dict | None = None, root_weights: list[float] | None = None,
-                 split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None):
+                 split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None,
+                 sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -338,6 +346,10 @@ class EventDataModule(L.LightningDataModule):
         self.features = FeatureConfig.from_dict(features or {})
         self.window, self.last_k, self.source, self.root = window, last_k, source, root
         self.lookahead = int(lookahead)
+        if sequence and int(sequence) < 8:
+            raise ValueError(f"data.sequence must be 0 (windows) or a crop length of at least 8 frames, got {sequence}")
+        self.sequence, self.sequence_radius = int(sequence or 0), int(sequence_radius)
+        self.sequence_repeats = max(int(sequence_repeats), 1)
         self.root_weights, self.split_seed = root_weights, seed if split_seed is None else split_seed
         if not 0.0 <= float(around) <= 1.0:
             raise ValueError(f"data.around must be a fraction in [0, 1], got {around!r}")
@@ -441,18 +453,32 @@ class EventDataModule(L.LightningDataModule):
                 clips = self.degraded("train", 0)
             elif self.degrade.enabled and split == "val":
                 clips = clips + [c for k in range(int(self.degrade.val_copies)) for c in self.degraded("val", k)]
-            self.sets[split] = WindowSet(clips, self.window, self.last_k, self.lookahead)
+            self.sets[split] = self._example_set(clips, split)
+
+    def _example_set(self, clips: list[LabelledClip], split: str):
+        """HitNet's windows, or the tagger's crops (:attr:`sequence`) of these clips."""
+        if not self.sequence:
+            return WindowSet(clips, self.window, self.last_k, self.lookahead)
+        from .tagger import SequenceSet
+
+        return SequenceSet(clips, self.sequence, self.sequence_radius, random=split == "train",
+                           repeats=self.sequence_repeats, seed=self.seed)
 
     def redraw(self) -> None:
-        """New degraded tracks for the training windows (in place: same windows, same labels); the first
-        call keeps the draw made by :meth:`setup`."""
+        """New degraded tracks for the training windows or crops (in place: same windows, same labels); the
+        first call keeps the draw made by :meth:`setup`."""
         if self._draw > 0:
             ds = self.sets["train"]
-            ds.x = WindowSet(self.degraded("train", self._draw), self.window, self.last_k, self.lookahead).x
+            if self.sequence:
+                ds.clips = self.degraded("train", self._draw)
+            else:
+                ds.x = WindowSet(self.degraded("train", self._draw), self.window, self.last_k, self.lookahead).x
         self._draw += 1
 
     def train_dataloader(self):
         ds = self.sets["train"]
+        if self.sequence:
+            return self._sequence_loader(ds)
         if int((ds.y > 0).sum()) == 0:
             raise ValueError("the training split has no events: nothing to learn (check events.csv and the "
                              f"class set {self.class_set.name})")
@@ -462,6 +488,29 @@ class EventDataModule(L.LightningDataModule):
                           sampler=BalancedSampler(ds.y, self.neg_ratio, self.seed, on_epoch=redraw,
                                                   weights=self.window_weights()),
                           num_workers=self.num_workers)
+
+    def _sequence_loader(self, ds) -> DataLoader:
+        """The tagger's training crops: every clip ``sequence_repeats`` times per epoch in a new order (drawn
+        by root share with ``root_weights``), new degraded tracks each epoch."""
+        if not any((t > 0).any() for t in ds.targets):
+            raise ValueError("the training split has no events: nothing to learn (check events.csv and the "
+                             f"class set {self.class_set.name})")
+        noisy_poses = self.features.poses and self.pose_noise.enabled
+        redraw = self.redraw if (self.degrade.enabled and self.degrade.every_epoch) or noisy_poses else None
+        w = self.clip_weights()
+        weights = None if w is None else w.repeat(self.sequence_repeats)
+        sampler = BalancedSampler(torch.ones(len(ds), dtype=torch.long), 0.0, self.seed, on_epoch=redraw,
+                                  weights=weights)
+        return DataLoader(ds, batch_size=self.batch_size, sampler=sampler, num_workers=self.num_workers)
+
+    def clip_weights(self) -> torch.Tensor | None:
+        """Per training clip, its sampling weight when ``root_weights`` mixes several roots (else None)."""
+        if self.source != "folder" or not self.root_weights or len(self.root_weights) < 2:
+            return None
+        roots = np.asarray(self.clip_source.get("train", []), np.int64)
+        counts = np.bincount(roots, minlength=len(self.root_weights)).astype(float)
+        w = np.asarray(self.root_weights, float)[roots] / np.maximum(counts[roots], 1)
+        return torch.as_tensor(w / w.sum())
 
     def window_weights(self) -> torch.Tensor | None:
         """Per training window, its sampling weight when ``root_weights`` mixes several roots (else None)."""
@@ -480,6 +529,9 @@ class EventDataModule(L.LightningDataModule):
         from training.distributed import eval_sampler
 
         ds = self.sets["val"]
+        if self.sequence:  # every crop of every validation clip, in order
+            return DataLoader(ds, batch_size=self.batch_size, num_workers=self.num_workers,
+                              sampler=eval_sampler(getattr(self, "trainer", None), ds))
         sampler = BalancedSampler(ds.y, 3.0, self.seed + 1, fixed=True)
         return DataLoader(ds, batch_size=self.batch_size * 4, num_workers=self.num_workers,
                           sampler=eval_sampler(getattr(self, "trainer", None), sampler) or sampler)

@@ -1,6 +1,6 @@
 """The Hydra tasks of the hit-event models (``task: events`` in the experiment config):
 
-``train_events``: fit HitNet on balanced windows → calibrate the temperature on validation windows →
+``train_events``: fit HitNet on balanced windows (or the event tagger on crops of whole clips) → calibrate the temperature on validation windows →
 tune the decoder on validation clips → export the model file (``<output_dir>/hitnet_<sport>.pth.tar``,
 and ``export_path`` when set) → only then evaluate the test clips (event-set metrics, thesis-style
 table per class; a failing table is reported and the run still succeeds). The tables say what the ball
@@ -22,6 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector, load_model_file
 from inference.events.features import FeatureConfig
+from inference.events.network import EventTagger
 from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
 from training.run import guarded_table, resume_path, save_manifests, write_eval_results
@@ -34,17 +35,42 @@ from .simulate import perturb
 log = logging.getLogger(__name__)
 
 
+def model_kind(module) -> str:
+    """``tagger`` for the per-frame event tagger, else ``hitnet``."""
+    return "tagger" if isinstance(module.net, EventTagger) else "hitnet"
+
+
+def model_label(module) -> str:
+    """The network's name in the tables, e.g. ``HitNet 2×64 bi`` or ``tagger 3×96``."""
+    h = module.hparams
+    if model_kind(module) == "tagger":
+        return f"tagger {h.layers}×{h.hidden}"
+    return f"HitNet {h.layers}×{h.hidden}{' bi' if h.bidirectional else ''}"
+
+
 def detector_from_module(module, dm: EventDataModule, decode: DecodeParams | None = None,
                          meta: dict | None = None) -> EventDetector:
-    return EventDetector("hitnet", dm.class_set, dm.features, decode or DecodeParams(), net=module.net,
+    return EventDetector(model_kind(module), dm.class_set, dm.features, decode or DecodeParams(), net=module.net,
                          window=dm.window, last_k=dm.last_k, lookahead=dm.lookahead, meta=meta or {})
 
 
 def calibrate(module, dm: EventDataModule, max_windows: int = 200_000) -> float:
-    """Fit the temperature on (up to ``max_windows``) validation windows; stored in the network."""
+    """Fit the temperature on (up to ``max_windows``) validation windows, or validation frames of the
+    tagger's crops; stored in the network."""
+    module.net.eval()
+    if model_kind(module) == "tagger":
+        x, y = (dm.sets.get("val") or dm._example_set(dm.labelled("val"), "val")).all_frames()
+        with torch.no_grad():
+            module.net.temperature.fill_(1.0)
+            logits = torch.cat([module.net(x[i:i + 64]) for i in range(0, len(x), 64)])
+        logits, y = logits.reshape(-1, logits.shape[-1]), y.reshape(-1)
+        keep = torch.nonzero(y >= 0).flatten()
+        idx = keep[torch.randperm(len(keep), generator=torch.Generator().manual_seed(0))[:max_windows]]
+        t = fit_temperature(logits[idx], y[idx])
+        module.net.temperature.fill_(t)
+        return t
     ds = dm.sets.get("val") or WindowSet(dm.labelled("val"), dm.window, dm.last_k, dm.lookahead)
     idx = torch.randperm(len(ds), generator=torch.Generator().manual_seed(0))[:max_windows]
-    module.net.eval()
     with torch.no_grad():
         module.net.temperature.fill_(1.0)
         logits = torch.cat([module.net(ds.x[idx[i:i + 8192]]) for i in range(0, len(idx), 8192)])
@@ -144,7 +170,7 @@ def train_events(cfg: DictConfig) -> dict[str, float]:
                                                  "data": {"source": dm.source, "root": dm.root,
                                                           "counts": dm.counts, "seed": dm.seed}})
     metrics["events/val_f1"] = det.meta["val_f1"] = tune(det, dm, passes=1 if dev else 2)
-    name = f"HitNet {module.hparams.layers}×{module.hparams.hidden}{' bi' if module.hparams.bidirectional else ''}"
+    name = model_label(module)
     save_manifests(dm, cfg)
     return test_and_export(cfg, det, dm, metrics, lambda: event_tables(det, dm, name, cfg=cfg))
 
@@ -204,7 +230,7 @@ def test_and_export(cfg: DictConfig, det: EventDetector, dm, metrics: dict[str, 
     write the rows to ``<output_dir>/results.{json,csv}`` and save the model file again with the scores in
     its meta. A failing table is reported (:func:`training.run.guarded_table`): the model stays saved.
     Returns ``metrics`` with the test scores added."""
-    outs = [Path(cfg.paths.output_dir) / f"hitnet_{dm.class_set.sport or 'model'}.pth.tar"]
+    outs = [Path(cfg.paths.output_dir) / f"{'tagger' if det.kind == 'tagger' else 'hitnet'}_{dm.class_set.sport or 'model'}.pth.tar"]
     outs += [Path(cfg.export_path)] if cfg.get("export_path") else []
     for out in outs:
         det.save(out)

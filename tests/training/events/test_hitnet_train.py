@@ -1,4 +1,4 @@
-"""Every hitnet* experiment composes and runs (fast_dev_run) like ``python train.py +experiment=NAME``;
+"""Every hitnet* and tagger* experiment composes and runs (fast_dev_run) like ``python train.py +experiment=NAME``;
 tennis trains from a dataset converted from a TrackNet ``Label.csv``; bad data gives clear errors."""
 from __future__ import annotations
 
@@ -18,7 +18,8 @@ from training.events.tracknet import convert_tracknet_dataset
 from training.run import evaluate, train
 
 ROOT = Path(__file__).resolve().parents[3]
-HITNET_EXPERIMENTS = sorted(p.stem for p in (ROOT / "conf" / "experiment").glob("hitnet*.yaml"))
+HITNET_EXPERIMENTS = sorted(p.stem for pattern in ("hitnet*.yaml", "tagger*.yaml")
+                            for p in (ROOT / "conf" / "experiment").glob(pattern))
 TINY = ["data.n_train=3", "data.n_val=2", "data.n_test=2", "data.batch_size=32", "trainer.accelerator=cpu"]
 
 
@@ -28,14 +29,15 @@ def test_hitnet_experiment_fast_dev_run(experiment, tmp_path):
     data = ["data.source=synthetic"] if experiment.endswith("_finetune") else []
     cfg = compose_cfg([f"+experiment={experiment}", "trainer.fast_dev_run=true", *TINY, *data,
                        f"data.cache_dir={tmp_path}/cache"], tmp_path)
-    assert cfg.task == "events" and cfg.model._target_.endswith("HitNetModule")
+    tagger = experiment.startswith("tagger")
+    assert cfg.task == "events" and cfg.model._target_.endswith("TaggerModule" if tagger else "HitNetModule")
     metrics = train(cfg)
     assert torch.isfinite(torch.tensor(metrics["train/loss_step"]))
     assert 0.05 <= metrics["events/temperature"] <= 20
     sport = cfg.data.sport  # hitnet_padel, hitnet_crop_padel, hitnet_padel_finetune: the file is named by sport
-    model = tmp_path / f"hitnet_{sport}.pth.tar"
+    model = tmp_path / f"{'tagger' if tagger else 'hitnet'}_{sport}.pth.tar"
     det = EventDetector.from_checkpoint(model)  # the exported file loads without the config
-    assert det.class_set.sport == sport and det.net is not None
+    assert det.class_set.sport == sport and det.net is not None and det.kind == ("tagger" if tagger else "hitnet")
     assert "events/gt_f1" in metrics and "events/e2e_f1" in metrics
     ev = compose_cfg([f"+experiment={experiment}", *TINY, *data, f"data.cache_dir={tmp_path}/cache",
                       f"ckpt_path={model}"], tmp_path / "e", name="eval")
