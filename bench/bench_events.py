@@ -2,7 +2,8 @@
 
     .venv/bin/python bench/bench_events.py [--clips 20] [--threads 1]
 
-HitNet rows use the shipped padel model when present plus untrained networks of the sweep's sizes
+HitNet and tagger rows use the shipped padel models when present (the player-aware ones without players:
+the same cost) plus untrained networks of the sweep's sizes
 (speed does not depend on the weights); the random forest is fitted on a small simulated set first.
 Frames are the clips' own frames (25–60 fps), so frames/s compares with a video's frame rate.
 """
@@ -15,7 +16,7 @@ import numpy as np
 import torch
 
 from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet, PhysicsParams
-from inference.events.detector import default_weights
+from inference.events.detector import PLAYER_WEIGHTS, WEIGHTS_DIR, default_weights
 
 
 def timed(fn, clips) -> float:
@@ -38,9 +39,10 @@ def main() -> None:
     cs, fc = ClassSet.load("padel6"), FeatureConfig()
     clips = simulate_clips("padel", args.clips, seed=99, progress=False)
     dets: list[tuple[str, EventDetector]] = []
-    path = default_weights("padel")
-    if path.is_file():
-        dets.append((f"HitNet shipped ({path.name})", EventDetector.from_checkpoint(path)))
+    for path in (default_weights("padel"), WEIGHTS_DIR / "hitnet_padel_players.pth.tar", WEIGHTS_DIR / PLAYER_WEIGHTS["padel"]):
+        if path.is_file():  # the player-aware ones run here without players (same cost)
+            det = EventDetector.from_checkpoint(path)
+            dets.append((f"{'tagger' if det.kind == 'tagger' else 'HitNet'} shipped ({path.name})", det))
     for layers, hidden in ((1, 16), (2, 64), (4, 128)):
         net = HitNet(fc.n_features, cs.n, hidden, layers, True)
         dets.append((f"HitNet {layers}×{hidden} bi (untrained)", EventDetector("hitnet", cs, fc, DecodeParams(), net=net)))

@@ -1,6 +1,7 @@
 """Rally segmentation on simulated rallies with the server's bounces before the serve and the ball after
 the point (``simulate_clips(..., around=True)``): serve frame within ±3 frames, end within ±0.3 s, and
-event F1 of the rally's events with and without the segmentation (the shipped model of the sport).
+event F1 of the rally's events with and without the segmentation (the model ``rally3d infer`` uses for the
+sport: ``choose_weights``, with or without players).
 
     .venv/bin/python bench/bench_rally.py [--sport padel] [--clips 100] [--track annotated|degraded]
         [--fps 25] [--seed 8] [--plain] [--players] [--degrade conf/data/degrade/detector_measured.yaml] [--why]
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -39,6 +41,7 @@ def main(argv=None) -> dict:
     from bench_event_conditions import measured_degrade  # bench/ is the script's folder
 
     from inference.events import EventDetector
+    from inference.events.detector import choose_weights
     from inference.events.features import dense_xy
     from inference.events.metrics import EventCounts, tolerance_frames
     from training.events.degrade import DegradeConfig, degrade_all
@@ -58,8 +61,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--plain", action="store_true", help="rallies without warm-up bounces or the ball after the point "
                     "(the standard clips: does the segmentation cost their events?)")
     ap.add_argument("--players", action="store_true",
-                    help="as `rally3d infer` with players found: the player-aware model (hitnet_<sport>_players) "
-                    "with the rallies' players seen through the pose noise measured on MoveNet")
+                    help="as `rally3d infer` with players found: the rallies' players seen through the pose noise "
+                    "measured on MoveNet (read by a player-aware model)")
     ap.add_argument("--why", action="store_true", help="print each rally whose serve or end is missed, and why")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -69,13 +72,11 @@ def main(argv=None) -> dict:
     degrade = DegradeConfig.from_dict(measured_degrade(args.degrade)) if args.degrade else DegradeConfig(p_clean=0.0)
     tracks = [c.ball for c in clips] if args.track == "annotated" else degrade_all(clips, args.seed, degrade)
     players = [None] * len(clips)
-    weights = args.weights
     if args.players:
-        from inference.events.detector import WEIGHTS_DIR
         from training.events.pose_noise import PoseNoiseConfig, noisy_all
 
         players = noisy_all(clips, 17, PoseNoiseConfig.from_file(MEASURED_POSE_NOISE))
-        weights = weights or str(WEIGHTS_DIR / f"hitnet_{args.sport}_players.pth.tar")
+    weights = choose_weights(args.weights, args.sport, next((p for p in players if p is not None and len(p)), None))
     det = EventDetector.from_checkpoint(weights, sport=args.sport)
     cs = det.class_set
     d_start, d_end, sources = [], [], {}
@@ -106,7 +107,8 @@ def main(argv=None) -> dict:
     }
     fps = f"{args.fps:g} fps" if args.fps else "25–60 fps"
     kind = "without" if args.plain else "with"
-    model = "player-aware model, players through the measured pose noise" if args.players else "ball-only model"
+    model = f"{Path(weights).name} ({'player-aware' if det.wants_players else 'ball only'}), " + (
+        "players through the measured pose noise" if args.players else "no players")
     print(f"\n{args.sport}, {len(clips)} simulated rallies {kind} pre-serve bounces and the ball after the point, "
           f"{args.track} track{' (' + args.degrade + ')' if args.degrade and args.track == 'degraded' else ''}, {fps}, {model}")
     print(f"serve frame within ±3 frames: {out['serve_within_3']:.1%} (median |error| "

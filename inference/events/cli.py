@@ -12,9 +12,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Runs the hit-event model on the clip's ball track (ball.csv: annotated or from rally3d "
         "detect) and writes events.csv with fine-grained labels. Grouped classes (padel ground_or_other_wall) "
         "are resolved to their surface with the clip's camera.yaml when present, else written as `ground`. "
-        "Default model: the shipped one of the clip's sport (inference/weights/hitnet_<sport>.pth.tar), or its "
-        "player-aware one (hitnet_<sport>_players.pth.tar) when the clip has players.csv and that model is shipped "
-        "(tennis: with or without players.csv, it beats the ball-only model either way).",
+        "Default model: the shipped player-aware event tagger of the clip's sport "
+        "(inference/weights/tagger_<sport>_players.pth.tar), which reads players.csv when the clip has one and "
+        "beats the ball-only HitNet (hitnet_<sport>.pth.tar, --weights) with or without it (docs/events.md).",
     )
     p.add_argument("clip", type=Path)
     p.add_argument("--weights", type=Path, help="a hit-event model file; default: the shipped one")
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--players", type=Path,
                    help="players.csv to read instead of the clip's (read by player-aware models; default: the "
                    "clip's players.csv when present)")
-    p.add_argument("--no-players", action="store_true", help="ignore players.csv (ball-only model and input)")
+    p.add_argument("--no-players", action="store_true", help="ignore players.csv (events from the ball alone)")
     p.add_argument("--no-camera", action="store_true", help="ignore camera.yaml (grouped classes → default label)")
     p.add_argument("--out", type=Path, help="write here instead of the clip's events.csv")
     p.add_argument("--rally-only", action="store_true",

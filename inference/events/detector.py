@@ -49,12 +49,13 @@ log = logging.getLogger(__name__)
 FORMAT = "rally3d-events"
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 DEFAULT_WEIGHTS = {"padel": "hitnet_padel.pth.tar", "tennis": "hitnet_tennis.pth.tar"}
-#: Player-aware models (``features.poses``), used by default when the clip has players; shipped only where
-#: they beat the ball-only model (docs/events.md): a sport without a file here falls back to the ball-only one.
-PLAYER_WEIGHTS = {"padel": "hitnet_padel_players.pth.tar", "tennis": "hitnet_tennis_players.pth.tar"}
+#: Player-aware models (``features.poses``; the event taggers, docs/events.md#event-tagger), used by default when
+#: the clip has players; shipped only where they beat the ball-only model: a sport without a file here falls back
+#: to the ball-only one.
+PLAYER_WEIGHTS = {"padel": "tagger_padel_players.pth.tar", "tennis": "tagger_tennis_players.pth.tar"}
 #: Sports whose player-aware model also beats the ball-only one on clips without players (it was trained with
 #: 10 % of its clips without any): their player-aware model is the default either way (docs/events.md).
-PLAYERS_OPTIONAL = frozenset({"tennis"})
+PLAYERS_OPTIONAL = frozenset({"tennis", "padel"})
 KINDS = ("hitnet", "physics", "crop", "tagger")
 
 

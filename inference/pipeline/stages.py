@@ -6,8 +6,8 @@ calibration, no pose backend) or :class:`StageError` (bad input: the message nam
 
 Order: camera → detect → smooth → players → events → reconstruct. The camera comes first because it is
 cheap and a calibration that does not fit the video must stop the run before the expensive detection; the
-players come before the events so that a player-aware event model can read them (without players, or
-with ``--pose none``, the events stage uses the ball-only model).
+players come before the events so that the player-aware event model can read them (without players, or
+with ``--pose none``, it runs on the ball alone).
 """
 from __future__ import annotations
 
@@ -358,8 +358,8 @@ def _players_for_events(ctx: Context):
 
 def _events_weights(ctx: Context) -> Path:
     """The hit-event model file the stage will load (so a new shipped model invalidates the cache): ``--events``,
-    else the shipped player-aware model when players were found (tennis: always) and one is shipped, else the
-    ball-only one."""
+    else the shipped player-aware model (with or without players: :data:`~inference.events.detector.PLAYERS_OPTIONAL`)
+    when one is shipped, else the ball-only one."""
     from inference.events.detector import choose_weights
 
     return choose_weights(ctx.cfg.events, ctx.clip.info.sport, _players_for_events(ctx))

@@ -136,7 +136,7 @@ def test_shipped_ball_only_weights_still_load_and_run(tennis):
     assert np.array_equal(r1.probs, r2.probs) and len(r1.events) > 5
 
 
-def test_player_aware_model_file_records_its_features_and_reads_players(tennis, tmp_path, caplog):
+def test_player_aware_model_file_records_its_features_and_reads_players(tennis, tmp_path, caplog, monkeypatch):
     torch.manual_seed(0)
     fc = FeatureConfig(poses=True)
     det = EventDetector("hitnet", ClassSet.load("tennis4"), fc, DecodeParams(), net=HitNet(fc.n_features, 4, 8, 1),
@@ -150,9 +150,13 @@ def test_player_aware_model_file_records_its_features_and_reads_players(tennis, 
     with_p = loaded.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)
     with caplog.at_level(logging.INFO, logger="inference.events.detector"):
         without = loaded.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames)
-    # tennis: said, not warned (its player-aware model is the default without players too); other sports: warned
+    # a sport in PLAYERS_OPTIONAL: said, not warned (its player-aware model is the default without players too);
+    # other sports: warned
     assert "no players given" in caplog.text and not [r for r in caplog.records if r.levelno >= logging.WARNING]
     caplog.clear()
+    from inference.events import detector as mod
+
+    monkeypatch.setattr(mod, "PLAYERS_OPTIONAL", frozenset({"tennis"}))
     pd = EventDetector("hitnet", ClassSet.load("padel6"), fc, DecodeParams(), net=HitNet(fc.n_features, 6, 8, 1),
                        window=12)
     with caplog.at_level(logging.WARNING, logger="inference.events.detector"):
@@ -175,29 +179,32 @@ def test_choose_weights_prefers_a_shipped_player_model_only_with_players(tennis,
     (tmp_path / mod.PLAYER_WEIGHTS["tennis"]).write_bytes(b"x")
     assert mod.choose_weights(None, "tennis", tennis.players).name == mod.PLAYER_WEIGHTS["tennis"]
     assert mod.choose_weights(tmp_path / "mine.pth.tar", "tennis", tennis.players).name == "mine.pth.tar"
-    # without players: padel falls back to its ball-only model, tennis keeps the player-aware one (it wins there too)
+    # without players: a sport in PLAYERS_OPTIONAL keeps its player-aware model (it wins there too), others fall back
     (tmp_path / mod.DEFAULT_WEIGHTS["padel"]).write_bytes(b"x")
     (tmp_path / mod.PLAYER_WEIGHTS["padel"]).write_bytes(b"x")
     assert mod.choose_weights(None, "padel", tennis.players).name == mod.PLAYER_WEIGHTS["padel"]
-    assert mod.choose_weights(None, "padel", PlayerTracks.empty()).name == mod.DEFAULT_WEIGHTS["padel"]
+    for sport in ("padel", "tennis"):
+        assert mod.choose_weights(None, sport, PlayerTracks.empty()).name == mod.PLAYER_WEIGHTS[sport]
+        assert mod.choose_weights(None, sport, None).name == mod.PLAYER_WEIGHTS[sport]
+    monkeypatch.setattr(mod, "PLAYERS_OPTIONAL", frozenset({"tennis"}))
     assert mod.choose_weights(None, "padel", None).name == mod.DEFAULT_WEIGHTS["padel"]
-    assert mod.choose_weights(None, "tennis", PlayerTracks.empty()).name == mod.PLAYER_WEIGHTS["tennis"]
-    assert mod.choose_weights(None, "tennis", None).name == mod.PLAYER_WEIGHTS["tennis"]
+    assert mod.choose_weights(None, "padel", tennis.players).name == mod.PLAYER_WEIGHTS["padel"]
     monkeypatch.setattr(mod, "PLAYERS_OPTIONAL", frozenset())
     assert mod.choose_weights(None, "tennis", None).name == mod.DEFAULT_WEIGHTS["tennis"]
 
 
-def test_the_shipped_tennis_player_model_beats_the_ball_only_one_without_players():
-    """Why tennis keeps its player-aware model without players: on held-out rallies with a degraded track and no
+@pytest.mark.parametrize("sport", ["tennis", "padel"])
+def test_the_shipped_player_model_beats_the_ball_only_one_without_players(sport):
+    """Why a sport keeps its player-aware model without players: on held-out rallies with a degraded track and no
     players.csv it finds more of the events than the ball-only model."""
     from inference.events import detector as mod
     from inference.events.metrics import EventCounts, tolerance_frames
     from training.events.degrade import DegradeConfig, degrade_all
 
-    clips = simulate_clips("tennis", 6, seed=6262, progress=False, fps=50.0)
+    clips = simulate_clips(sport, 6, seed=6262, progress=False, fps=50.0)
     tracks = degrade_all(clips, 3, DegradeConfig(p_clean=0.0, integer_px=True, far_miss=0.3))
     f1 = {}
-    for name, path in (("players", mod.WEIGHTS_DIR / mod.PLAYER_WEIGHTS["tennis"]), ("ball", mod.default_weights("tennis"))):
+    for name, path in (("players", mod.WEIGHTS_DIR / mod.PLAYER_WEIGHTS[sport]), ("ball", mod.default_weights(sport))):
         det = EventDetector.from_checkpoint(path)
         counts = EventCounts(det.class_set.classes)
         for c, tr in zip(clips, tracks):
@@ -223,7 +230,7 @@ def test_the_shipped_player_aware_padel_model_reads_players_and_runs_without():
 
     c = simulate_clip("padel", 515, players=True)
     path = choose_weights(None, "padel", c.players)
-    assert path.name == "hitnet_padel_players.pth.tar"
+    assert path.name == "tagger_padel_players.pth.tar"
     det = EventDetector.from_checkpoint(path, sport="padel")
     assert det.wants_players and det.class_set.name == "padel6"
     r = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)
@@ -233,4 +240,4 @@ def test_the_shipped_player_aware_padel_model_reads_players_and_runs_without():
                [cs.index(x) for x in r.coarse], 2)
     assert scored.scores()["f1"] > 0.6, scored.scores()          # an exact rally: most events found
     alone = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames)   # no players: still runs
-    assert len(alone.events) > 0 and choose_weights(None, "padel", None).name == "hitnet_padel.pth.tar"
+    assert len(alone.events) > 0 and choose_weights(None, "padel", None).name == "tagger_padel_players.pth.tar"
