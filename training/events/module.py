@@ -59,7 +59,45 @@ def log_event_metrics(module: L.LightningModule, stage: str, outputs: list[tuple
         module.log("val/f1_best", module.best_f1)
     return f1
 
-class HitNetModule(L.LightningModule):
+class EventSteps:
+    """The training, validation and test steps shared by the hit-event Lightning modules: augment, the loss
+    (``self._loss(logits, y)``), and the per-class F1 of ``self._pairs(logits, y) → (pred, y)`` (class indices,
+    padding left out) at each epoch's end. Needs ``features``, ``aug``, ``mirror_perm``, ``class_set`` and ``_val``."""
+
+    def _loss(self, logits: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return self.loss(logits, y)
+
+    def _pairs(self, logits: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return logits.argmax(1), y
+
+    def training_step(self, batch, _):
+        x, y = batch
+        x, y = augment_batch(x, y, self.features, self.aug, self.mirror_perm)
+        loss = self._loss(self(x), y)
+        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y), sync_dist=True)
+        return loss
+
+    def _eval_step(self, batch, stage: str):
+        x, y = batch
+        logits = self(x)
+        self.log(f"{stage}/loss", self._loss(logits, y), on_epoch=True, batch_size=len(y), sync_dist=True)
+        pred, true = self._pairs(logits, y)
+        self._val.append((pred.cpu(), true.cpu()))
+
+    def validation_step(self, batch, _):
+        self._eval_step(batch, "val")
+
+    def test_step(self, batch, _):
+        self._eval_step(batch, "test")
+
+    def on_validation_epoch_end(self) -> None:
+        log_event_metrics(self, "val", self._val, self.class_set.n)
+
+    def on_test_epoch_end(self) -> None:
+        log_event_metrics(self, "test", self._val, self.class_set.n)
+
+
+class HitNetModule(EventSteps, L.LightningModule):
     """Args:
         class_set: name or dict; features: :class:`FeatureConfig` fields (must match the data's).
         hidden, layers, bidirectional, dropout: the network. lr, weight_decay, clip_norm: Adam (MonoTrack:
@@ -83,34 +121,6 @@ class HitNetModule(L.LightningModule):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x)
-
-    def training_step(self, batch, _):
-        x, y = batch
-        x, y = augment_batch(x, y, self.features, self.aug, self.mirror_perm)
-        loss = self.loss(self(x), y)
-        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y), sync_dist=True)
-        return loss
-
-    def _eval_step(self, batch, stage: str):
-        x, y = batch
-        logits = self(x)
-        self.log(f"{stage}/loss", self.loss(logits, y), on_epoch=True, batch_size=len(y), sync_dist=True)
-        self._val.append((logits.argmax(1).cpu(), y.cpu()))
-
-    def validation_step(self, batch, _):
-        self._eval_step(batch, "val")
-
-    def test_step(self, batch, _):
-        self._eval_step(batch, "test")
-
-    def _eval_end(self, stage: str) -> None:
-        log_event_metrics(self, stage, self._val, self.class_set.n)
-
-    def on_validation_epoch_end(self) -> None:
-        self._eval_end("val")
-
-    def on_test_epoch_end(self) -> None:
-        self._eval_end("test")
 
     def configure_optimizers(self):
         opt = torch.optim.Adam(trainable(self), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)

@@ -24,8 +24,8 @@ from inference.events.network import EventTagger
 from training.finetune import freeze as freeze_layers
 from training.finetune import trainable
 
-from .data import AugmentConfig, LabelledClip, augment_batch
-from .module import log_event_metrics
+from .data import AugmentConfig, LabelledClip
+from .module import EventSteps
 
 IGNORE = -100  # padding frames: no loss, no score
 
@@ -78,7 +78,7 @@ class SequenceSet(Dataset):
         return torch.stack(xs), torch.stack(ys)
 
 
-class TaggerModule(L.LightningModule):
+class TaggerModule(EventSteps, L.LightningModule):
     """Args:
         class_set: name or dict; features: :class:`FeatureConfig` fields (must match the data's).
         hidden, layers, kernel, dropout: the network. lr, weight_decay: AdamW with a one-cycle schedule over
@@ -108,31 +108,9 @@ class TaggerModule(L.LightningModule):
     def _loss(self, logits: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         return self.loss(logits.reshape(-1, logits.shape[-1]), y.reshape(-1))
 
-    def training_step(self, batch, _):
-        x, y = batch
-        x, y = augment_batch(x, y, self.features, self.aug, self.mirror_perm)
-        loss = self._loss(self(x), y)
-        self.log("train/loss", loss, prog_bar=True, on_step=True, on_epoch=True, batch_size=len(y), sync_dist=True)
-        return loss
-
-    def _eval_step(self, batch, stage: str):
-        x, y = batch
-        logits = self(x)
-        self.log(f"{stage}/loss", self._loss(logits, y), on_epoch=True, batch_size=len(y), sync_dist=True)
+    def _pairs(self, logits: torch.Tensor, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         keep = y.reshape(-1) != IGNORE
-        self._val.append((logits.argmax(-1).reshape(-1)[keep].cpu(), y.reshape(-1)[keep].cpu()))
-
-    def validation_step(self, batch, _):
-        self._eval_step(batch, "val")
-
-    def test_step(self, batch, _):
-        self._eval_step(batch, "test")
-
-    def on_validation_epoch_end(self) -> None:
-        log_event_metrics(self, "val", self._val, self.class_set.n)
-
-    def on_test_epoch_end(self) -> None:
-        log_event_metrics(self, "test", self._val, self.class_set.n)
+        return logits.argmax(-1).reshape(-1)[keep], y.reshape(-1)[keep]
 
     def configure_optimizers(self):
         opt = torch.optim.AdamW(trainable(self), lr=self.hparams.lr, weight_decay=self.hparams.weight_decay)
