@@ -462,7 +462,7 @@ class EventDataModule(L.LightningDataModule):
         from .tagger import SequenceSet
 
         return SequenceSet(clips, self.sequence, self.sequence_radius, random=split == "train",
-                           repeats=self.sequence_repeats, seed=self.seed)
+                           repeats=self.sequence_repeats)
 
     def redraw(self) -> None:
         """New degraded tracks for the training windows or crops (in place: same windows, same labels); the

@@ -43,15 +43,15 @@ class SequenceSet(Dataset):
     """Crops of ``length`` frames of labelled clips.
 
     ``random=True`` (training): item ``i`` is a random crop of clip ``i % n_clips`` (``repeats`` items per
-    clip and epoch); else (validation, test) the clips cut into consecutive crops, the last one padded.
+    clip and epoch; the offset drawn from torch's RNG, which ``seed_everything(workers=True)`` seeds in each
+    loader worker); else (validation, test) the clips cut into consecutive crops, the last one padded.
     ``clips`` may be replaced (new degraded tracks each epoch: same clips, same labels)."""
 
     def __init__(self, clips: list[LabelledClip], length: int, radius: int = 1, random: bool = True,
-                 repeats: int = 1, seed: int = 0):
+                 repeats: int = 1):
         if length < 8:
             raise ValueError(f"data.sequence must be at least 8 frames, got {length}")
         self.clips, self.length, self.radius, self.random, self.repeats = clips, int(length), int(radius), random, repeats
-        self.gen = np.random.default_rng(seed)
         self.targets = [frame_targets(c.y, self.radius) for c in clips]
         self.index = [(k, s) for k, c in enumerate(clips) for s in range(0, max(len(c.feats), 1), self.length)]
 
@@ -61,7 +61,7 @@ class SequenceSet(Dataset):
     def __getitem__(self, i):
         if self.random:
             k = i % len(self.clips)
-            s = int(self.gen.integers(0, max(len(self.clips[k].feats) - self.length, 0) + 1))
+            s = int(torch.randint(0, max(len(self.clips[k].feats) - self.length, 0) + 1, ()))
         else:
             k, s = self.index[i]
         c, L_ = self.clips[k], self.length
