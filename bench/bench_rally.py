@@ -41,7 +41,7 @@ def main(argv=None) -> dict:
     from bench_event_conditions import measured_degrade  # bench/ is the script's folder
 
     from inference.events import EventDetector
-    from inference.events.detector import choose_weights
+    from inference.events.detector import choose_weights, has_players
     from inference.events.features import dense_xy
     from inference.events.metrics import EventCounts, tolerance_frames
     from training.events.degrade import DegradeConfig, degrade_all
@@ -76,7 +76,7 @@ def main(argv=None) -> dict:
         from training.events.pose_noise import PoseNoiseConfig, noisy_all
 
         players = noisy_all(clips, 17, PoseNoiseConfig.from_file(MEASURED_POSE_NOISE))
-    weights = choose_weights(args.weights, args.sport, next((p for p in players if p is not None and len(p)), None))
+    weights = choose_weights(args.weights, args.sport, next((p for p in players if has_players(p)), None))
     det = EventDetector.from_checkpoint(weights, sport=args.sport)
     cs = det.class_set
     d_start, d_end, sources = [], [], {}

@@ -453,9 +453,9 @@ class EventDataModule(L.LightningDataModule):
                 clips = self.degraded("train", 0)
             elif self.degrade.enabled and split == "val":
                 clips = clips + [c for k in range(int(self.degrade.val_copies)) for c in self.degraded("val", k)]
-            self.sets[split] = self._example_set(clips, split)
+            self.sets[split] = self.example_set(clips, split)
 
-    def _example_set(self, clips: list[LabelledClip], split: str):
+    def example_set(self, clips: list[LabelledClip], split: str):
         """HitNet's windows, or the tagger's crops (:attr:`sequence`) of these clips."""
         if not self.sequence:
             return WindowSet(clips, self.window, self.last_k, self.lookahead)
@@ -498,30 +498,33 @@ class EventDataModule(L.LightningDataModule):
         noisy_poses = self.features.poses and self.pose_noise.enabled
         redraw = self.redraw if (self.degrade.enabled and self.degrade.every_epoch) or noisy_poses else None
         w = self.clip_weights()
-        weights = None if w is None else w.repeat(self.sequence_repeats)
+        weights = None if w is None else w.repeat(self.sequence_repeats)  # item i is clip i % n_clips
         sampler = BalancedSampler(torch.ones(len(ds), dtype=torch.long), 0.0, self.seed, on_epoch=redraw,
                                   weights=weights)
         return DataLoader(ds, batch_size=self.batch_size, sampler=sampler, num_workers=self.num_workers)
 
     def clip_weights(self) -> torch.Tensor | None:
         """Per training clip, its sampling weight when ``root_weights`` mixes several roots (else None)."""
-        if self.source != "folder" or not self.root_weights or len(self.root_weights) < 2:
+        if not self._mixes_roots():
             return None
-        roots = np.asarray(self.clip_source.get("train", []), np.int64)
-        counts = np.bincount(roots, minlength=len(self.root_weights)).astype(float)
-        w = np.asarray(self.root_weights, float)[roots] / np.maximum(counts[roots], 1)
+        return self._root_shares(np.asarray(self.clip_source.get("train", []), np.int64))
+
+    def _mixes_roots(self) -> bool:
+        return self.source == "folder" and bool(self.root_weights) and len(self.root_weights) >= 2
+
+    def _root_shares(self, src: np.ndarray) -> torch.Tensor:
+        """Per item (its root index in ``src``), its root's share divided by the root's item count, normalised."""
+        counts = np.bincount(src, minlength=len(self.root_weights)).astype(float)
+        w = np.asarray(self.root_weights, float)[src] / np.maximum(counts[src], 1)
         return torch.as_tensor(w / w.sum())
 
     def window_weights(self) -> torch.Tensor | None:
         """Per training window, its sampling weight when ``root_weights`` mixes several roots (else None)."""
-        if self.source != "folder" or not self.root_weights or len(self.root_weights) < 2:
+        if not self._mixes_roots():
             return None
         clips, roots = self.labelled("train"), self.clip_source.get("train", [])
         per_clip = [len(window_starts(len(c.feats), self.window)) for c in clips]  # as clip_windows cuts them
-        src = np.repeat(np.asarray(roots, np.int64), per_clip)
-        counts = np.bincount(src, minlength=len(self.root_weights)).astype(float)
-        w = np.asarray(self.root_weights, float)[src] / np.maximum(counts[src], 1)
-        return torch.as_tensor(w / w.sum())
+        return self._root_shares(np.repeat(np.asarray(roots, np.int64), per_clip))
 
     def val_dataloader(self):
         """The same windows every epoch (all positives, 3 × as many negatives drawn once); under DDP each

@@ -27,7 +27,7 @@ from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
 from training.run import guarded_table, resume_path, save_manifests, write_eval_results
 
-from .data import EventDataModule, WindowSet
+from .data import EventDataModule
 from .degrade import DegradeConfig, degrade_all
 from .evaluate import counts_for, detector_scorer, fit_temperature, score_all, tune_decoder
 from .simulate import perturb
@@ -54,27 +54,33 @@ def detector_from_module(module, dm: EventDataModule, decode: DecodeParams | Non
                          window=dm.window, last_k=dm.last_k, lookahead=dm.lookahead, meta=meta or {})
 
 
+def _first(n: int, max_n: int) -> torch.Tensor:
+    """A fixed random draw of at most ``max_n`` of ``n`` indices."""
+    return torch.randperm(n, generator=torch.Generator().manual_seed(0))[:max_n]
+
+
+@torch.no_grad()
+def _val_logits(module, dm: EventDataModule, max_n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Uncalibrated logits ``(N, C)`` and labels ``(N,)`` of at most ``max_n`` validation windows, or frames of
+    the tagger's crops (padding left out)."""
+    ds = dm.sets.get("val") or dm.example_set(dm.labelled("val"), "val")
+    if model_kind(module) == "tagger":
+        x, y = ds.all_frames()
+        logits = torch.cat([module.net(x[i:i + 64]) for i in range(0, len(x), 64)])
+        logits, y = logits.reshape(-1, logits.shape[-1]), y.reshape(-1)
+        idx = torch.nonzero(y >= 0).flatten()
+        idx = idx[_first(len(idx), max_n)]
+        return logits[idx], y[idx]
+    idx = _first(len(ds), max_n)
+    return torch.cat([module.net(ds.x[idx[i:i + 8192]]) for i in range(0, len(idx), 8192)]), ds.y[idx]
+
+
 def calibrate(module, dm: EventDataModule, max_windows: int = 200_000) -> float:
     """Fit the temperature on (up to ``max_windows``) validation windows, or validation frames of the
     tagger's crops; stored in the network."""
     module.net.eval()
-    if model_kind(module) == "tagger":
-        x, y = (dm.sets.get("val") or dm._example_set(dm.labelled("val"), "val")).all_frames()
-        with torch.no_grad():
-            module.net.temperature.fill_(1.0)
-            logits = torch.cat([module.net(x[i:i + 64]) for i in range(0, len(x), 64)])
-        logits, y = logits.reshape(-1, logits.shape[-1]), y.reshape(-1)
-        keep = torch.nonzero(y >= 0).flatten()
-        idx = keep[torch.randperm(len(keep), generator=torch.Generator().manual_seed(0))[:max_windows]]
-        t = fit_temperature(logits[idx], y[idx])
-        module.net.temperature.fill_(t)
-        return t
-    ds = dm.sets.get("val") or WindowSet(dm.labelled("val"), dm.window, dm.last_k, dm.lookahead)
-    idx = torch.randperm(len(ds), generator=torch.Generator().manual_seed(0))[:max_windows]
-    with torch.no_grad():
-        module.net.temperature.fill_(1.0)
-        logits = torch.cat([module.net(ds.x[idx[i:i + 8192]]) for i in range(0, len(idx), 8192)])
-    t = fit_temperature(logits, ds.y[idx])
+    module.net.temperature.fill_(1.0)
+    t = fit_temperature(*_val_logits(module, dm, max_windows))
     module.net.temperature.fill_(t)
     return t
 
