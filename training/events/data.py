@@ -20,14 +20,15 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from inference.clipio import Clip, FormatError
+from inference.clipio import BallTrack, Clip, FormatError
 from inference.court import load_court
 from inference.events.classes import ClassSet
 from inference.events.features import (FeatureConfig, check_label_block, clip_features, make_windows, to_ref_frames,
                                        window_labels, window_starts)
 
 from .degrade import DegradeConfig, degrade_all
-from .pose_noise import PoseNoiseConfig, noisy_all
+from .parallel import clip_rngs, map_clips
+from .pose_noise import PoseNoiseConfig, noisy_all, noisy_players
 from .simulate import SimClip, simulate_clips
 
 log = logging.getLogger(__name__)
@@ -58,26 +59,33 @@ def ref_labels(sim: SimClip, class_set: ClassSet, features: FeatureConfig, n_ref
 
 
 def label_clips(clips: list[SimClip], class_set: ClassSet, features: FeatureConfig,
-                on_unmapped: str = "error") -> list[LabelledClip]:
-    """Features (with each clip's ``players`` when ``features.poses``) and reference-rate labels."""
+                on_unmapped: str = "error", workers: int = 0) -> list[LabelledClip]:
+    """Features (with each clip's ``players`` when ``features.poses``) and reference-rate labels
+    (``workers``: forked processes, :func:`~training.events.parallel.map_clips`)."""
     court = load_court(class_set.sport) if class_set.sport else None
-    out = []
-    for c in clips:
+
+    def job(k: int) -> tuple[np.ndarray, np.ndarray]:
+        c = clips[k]
         feats = clip_features(c.ball, c.n_frames, c.fps, features, camera=c.camera, court=court, players=c.players)
-        out.append(LabelledClip(c, feats, ref_labels(c, class_set, features, len(feats), on_unmapped)))
-    return out
+        return feats, ref_labels(c, class_set, features, len(feats), on_unmapped)
+
+    return [LabelledClip(c, feats, y) for c, (feats, y) in zip(clips, map_clips(job, len(clips), workers))]
 
 
-def with_tracks(clips: list[LabelledClip], tracks, features: FeatureConfig, court=None,
-                players=None) -> list[LabelledClip]:
+def with_tracks(clips: list[LabelledClip], tracks: list[BallTrack], features: FeatureConfig, court=None,
+                players=None, workers: int = 0) -> list[LabelledClip]:
     """The same clips and labels with other ball tracks (e.g. degraded ones), and other players when
-    ``players`` (one per clip) is given: features recomputed."""
-    out = []
-    for k, (lc, track) in enumerate(zip(clips, tracks)):
-        s = lc.sim if players is None else replace(lc.sim, players=players[k])
-        feats = clip_features(track, s.n_frames, s.fps, features, camera=s.camera, court=court, players=s.players)
-        out.append(LabelledClip(s, feats, lc.y))
-    return out
+    ``players`` is given: features recomputed. ``players``: one per clip, or a function of the clip's index
+    that draws them (then drawn in the workers; the returned clips keep their own ``sim.players``)."""
+    def job(k: int) -> np.ndarray:
+        s = clips[k].sim
+        pl = s.players if players is None else (players(k) if callable(players) else players[k])
+        return clip_features(tracks[k], s.n_frames, s.fps, features, camera=s.camera, court=court, players=pl)
+
+    feats = map_clips(job, len(clips), workers)
+    if players is not None and not callable(players):
+        return [LabelledClip(replace(lc.sim, players=p), f, lc.y) for lc, p, f in zip(clips, players, feats)]
+    return [LabelledClip(lc.sim, f, lc.y) for lc, f in zip(clips, feats)]
 
 
 def clips_from_folder(root, split: str, seed: int = 0, sources=None) -> list[SimClip]:
@@ -245,9 +253,13 @@ def player_offset_columns(features: FeatureConfig) -> tuple[list[tuple[int, int]
 def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg: AugmentConfig,
                   mirror_perm: torch.Tensor, gen: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Augment ``(B, W, F)`` windows and their labels ``(B,)``, or crops and their per-frame labels ``(B, W)``
-    (see :class:`AugmentConfig`)."""
+    (see :class:`AugmentConfig`). Batches on an accelerator are augmented on the CPU (the random draws
+    and ``gen`` live there) and moved back."""
     if not cfg.enabled or len(x) == 0:
         return x, y
+    if x.device.type != "cpu":
+        xa, ya = augment_batch(x.cpu(), y.cpu(), features, cfg, mirror_perm.cpu(), gen)
+        return xa.to(x.device, non_blocking=True), ya.to(y.device, non_blocking=True)
     x = x.clone()
     B, W, _ = x.shape
     w = torch.tensor(cfg.weights, dtype=torch.float)
@@ -322,6 +334,9 @@ class EventDataModule(L.LightningDataModule):
             examples (:class:`~training.events.tagger.SequenceSet`: ``sequence_repeats`` random crops per
             training clip and epoch, events spread over ± ``sequence_radius`` frames); ``batch_size`` then
             counts crops.
+        prep_workers: forked processes for the per-clip data work (simulation, labelling, each epoch's new
+            degraded tracks and players; :mod:`.parallel`): the same data as 0, faster on many cores. 0 or 1:
+            in this process. (``num_workers`` is the DataLoader's.)
     """
 
     def __init__(self, sport: str = "padel", class_set: str | dict = "padel6", features: dict | None = None,
@@ -332,7 +347,7 @@ class EventDataModule(L.LightningDataModule):
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
                  degrade: dict | None = None, root_weights: list[float] | None = None,
                  split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None,
-                 sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2):
+                 sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2, prep_workers: int = 0):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -359,6 +374,9 @@ class EventDataModule(L.LightningDataModule):
         self.counts = {"train": n_train, "val": n_val, "test": n_test}
         self.seed, self.on_unmapped, self.neg_ratio = seed, on_unmapped, neg_ratio
         self.batch_size, self.num_workers, self.cache_dir = batch_size, num_workers, cache_dir
+        if int(prep_workers or 0) < 0:
+            raise ValueError(f"data.prep_workers must be 0 (in this process) or a number of processes, got {prep_workers}")
+        self.prep_workers = int(prep_workers or 0)
         self.augment = AugmentConfig(**(augment or {}))
         self.degrade = DegradeConfig.from_dict(degrade)
         self.pose_noise = PoseNoiseConfig.from_dict(pose_noise)
@@ -391,11 +409,12 @@ class EventDataModule(L.LightningDataModule):
             n = self.counts[split]
             n_around = int(round(self.around * n))
             pl = self.features.poses  # players articulated and projected only when the model reads them
+            w = self.prep_workers
             clips = simulate_clips(self.sport, n - n_around, self.seed * 10 + offset, self.cache_dir,
-                                   players=pl) if n > n_around else []
+                                   players=pl, workers=w) if n > n_around else []
             if n_around:  # rallies with the server's bounces before the serve and the ball after the point
                 clips += simulate_clips(self.sport, n_around, self.seed * 10 + offset + 5, self.cache_dir, around=True,
-                                        players=pl)
+                                        players=pl, workers=w)
         return clips
 
     def labelled(self, split: str) -> list[LabelledClip]:
@@ -406,31 +425,37 @@ class EventDataModule(L.LightningDataModule):
             self._exact[split] = raw
             if self.features.poses:  # the players as a pose backend would give them (a fixed draw per split)
                 raw = [replace(c, players=p) for c, p in zip(raw, self.players_draw(split, raw, 0))]
-            self.clips[split] = label_clips(raw, self.class_set, self.features, self.on_unmapped)
+            self.clips[split] = label_clips(raw, self.class_set, self.features, self.on_unmapped, self.prep_workers)
             n_ev = sum(int((c.y > 0).sum()) for c in self.clips[split])
             if n_ev == 0:
                 log.warning("the %s split has no events of the class set %s: the model cannot learn events "
                             "from it", split, self.class_set.name)
         return self.clips[split]
 
+    def players_seed(self, split: str, draw: int) -> int:
+        """The pose-noise seed of a split's draw."""
+        offset = {"train": 0, "val": 1, "test": 2}[split]
+        return (self.seed * 10 + offset) * 1000 + 500 + draw
+
     def players_draw(self, split: str, sims: list[SimClip], draw: int) -> list:
         """Noisy players of ``sims`` (:mod:`.pose_noise`; a fixed seed per split and draw)."""
-        offset = {"train": 0, "val": 1, "test": 2}[split]
-        return noisy_all(sims, (self.seed * 10 + offset) * 1000 + 500 + draw, self.pose_noise)
+        return noisy_all(sims, self.players_seed(split, draw), self.pose_noise, self.prep_workers)
 
     def degraded(self, split: str, draw: int = 0) -> list[LabelledClip]:
         """The clips of ``split`` with degraded tracks (draw ``draw``: a fixed seed per split and draw); with
-        ``features.poses`` and a draw > 0, new noisy players too."""
+        ``features.poses`` and a draw > 0, features from new noisy players too (drawn per clip, in the
+        ``prep_workers``; the clips' ``sim.players`` stay the split's fixed draw)."""
         clips = self.labelled(split)
         offset = {"train": 0, "val": 1, "test": 2}[split]
         seed = (self.seed * 10 + offset) * 1000 + draw
         court = load_court(self.class_set.sport) if self.class_set.sport else None
+        tracks = degrade_all([c.sim for c in clips], seed, self.degrade, self.prep_workers)
         players = None
         if self.features.poses and draw > 0:
-            players = self.players_draw(split, self._exact[split], draw)
-        return with_tracks(clips, degrade_all([c.sim for c in clips], seed, self.degrade), self.features, court,
-                           players)
-
+            exact = self._exact[split]
+            rngs = clip_rngs(self.players_seed(split, draw), len(exact))
+            players = lambda k: noisy_players(exact[k], rngs[k], self.pose_noise)  # noqa: E731
+        return with_tracks(clips, tracks, self.features, court, players, self.prep_workers)
 
     def tuning_clips(self) -> tuple[list[SimClip], list]:
         """Validation clips and their tracks for temperature and decoder tuning: the annotated tracks, plus

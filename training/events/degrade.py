@@ -38,6 +38,7 @@ import numpy as np
 
 from inference.clipio import BallTrack
 
+from .parallel import clip_rngs, map_clips
 from .simulate import SimClip, every_frame
 
 
@@ -301,7 +302,8 @@ def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = Degrade
     return Degraded(out, occluded, missed, outlier, smoothed)
 
 
-def degrade_all(clips: list[SimClip], seed: int, cfg: DegradeConfig) -> list[BallTrack]:
-    """Degraded tracks of many clips; the same seed gives the same tracks."""
-    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(clips))]
-    return [degrade(c, r, cfg).track for c, r in zip(clips, rngs)]
+def degrade_all(clips: list[SimClip], seed: int, cfg: DegradeConfig, workers: int = 0) -> list[BallTrack]:
+    """Degraded tracks of many clips; the same seed gives the same tracks (``workers``: forked processes,
+    :func:`~training.events.parallel.map_clips`)."""
+    rngs = clip_rngs(seed, len(clips))
+    return map_clips(lambda k: degrade(clips[k], rngs[k], cfg).track, len(clips), workers)

@@ -22,6 +22,7 @@ import numpy as np
 from inference.clipio import PlayerTracks
 
 from .degrade import _pair, config_from_dict
+from .parallel import clip_rngs, map_clips
 
 
 @dataclass(frozen=True)
@@ -273,7 +274,8 @@ def noisy_players(sim, rng: np.random.Generator, cfg: PoseNoiseConfig = PoseNois
     return _fill_gaps(out, fps, cfg.fill_gap_s) if cfg.fill_gap_s > 0 and len(out) else out
 
 
-def noisy_all(clips, seed: int, cfg: PoseNoiseConfig) -> list[PlayerTracks | None]:
-    """Noisy players of many clips; the same seed gives the same players."""
-    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(len(clips))]
-    return [noisy_players(c, r, cfg) for c, r in zip(clips, rngs)]
+def noisy_all(clips, seed: int, cfg: PoseNoiseConfig, workers: int = 0) -> list[PlayerTracks | None]:
+    """Noisy players of many clips; the same seed gives the same players (``workers``: forked processes,
+    :func:`~training.events.parallel.map_clips`)."""
+    rngs = clip_rngs(seed, len(clips))
+    return map_clips(lambda k: noisy_players(clips[k], rngs[k], cfg), len(clips), workers)

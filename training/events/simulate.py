@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import pickle
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -29,6 +30,10 @@ from training.synth.cameras import CameraSpec
 from training.synth.generate import DEFAULT_CAMERA
 from training.synth.groundtruth import event_table, inside_image
 from training.synth.rally import REAL_AROUND, default_config, simulate_rally
+
+from .parallel import can_fork, map_clips
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -125,9 +130,10 @@ def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: 
 
 def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None = None,
                    progress: bool = True, around: bool = False, fps: float | None = None,
-                   players: bool = False) -> list[SimClip]:
+                   players: bool = False, workers: int = 0) -> list[SimClip]:
     """``n`` clips with seeds ``seed * 1_000_003 + k``; cached as a pickle under ``cache_dir``
-    (``around``, ``fps``, ``players``: see :func:`simulate_clip`)."""
+    (``around``, ``fps``, ``players``: see :func:`simulate_clip`); ``workers > 1``: simulated in that many
+    forked processes (the same clips, :mod:`.parallel`)."""
     if n <= 0:
         raise ValueError(f"need at least one clip, got n={n}")
     cache = None
@@ -139,8 +145,12 @@ def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None =
             with open(cache, "rb") as fh:
                 return pickle.load(fh)
     court = load_court(sport)
-    clips = [simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players)
-             for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
+    if workers and workers > 1 and can_fork():
+        log.info("simulating %d %s rallies in %d processes", n, sport, workers)
+        clips = map_clips(lambda k: simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players), n, workers)
+    else:
+        clips = [simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players)
+                 for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
         tmp = private_temp_path(cache)  # DDP ranks may simulate the same set at once
