@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if frames is not None:
             frames.close()
-    path = write_events_csv(args.out or clip.events_path, result.events)
+    path = write_events_csv(args.out or clip.events_path, result.events_with_timing())
     from .rally import write_rally_yaml
 
     rally_path = write_rally_yaml(path.parent / "rally.yaml", result.rally, info.fps,

@@ -207,3 +207,31 @@ def decode(probs: np.ndarray, fps: float, class_set: ClassSet, params: DecodePar
     idx = np.asarray(chosen, np.int64)
     frames = np.clip(cand.frame[idx] + params.shift, 0, max(T - 1, 0)) if len(idx) else np.zeros(0, np.int64)
     return frames.astype(np.int64), cand.cls[idx].astype(np.int64)
+
+
+def event_spread(probs: np.ndarray, frames: np.ndarray, cls: np.ndarray, radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per decoded event, how sure the model is of it and of its timing.
+
+    Args:
+        probs: ``(T, C)`` per-frame class probabilities; frames, cls: ``(N,)`` decoded events (:func:`decode`).
+        radius: frames either side of an event over which its class's probability counts (the peak radius).
+    Returns:
+        ``(sigma (N,), peak (N,))``: the standard deviation in frames of the class's probability mass within
+        ``± radius`` of the event (its timing uncertainty; a sharp peak gives < 1, a flat one ≈ radius / √3),
+        and the class's probability on the event's frame. On held-out tennis rallies with gaps at the contacts
+        the events in the top quarter of ``sigma`` were off by more than 2 frames 21 % of the time, those in the
+        bottom quarter never (docs/events.md, "Event tagger").
+    """
+    n = len(frames)
+    sigma, peak = np.full(n, np.nan), np.full(n, np.nan)
+    T = len(probs)
+    for k, (f, c) in enumerate(zip(np.asarray(frames, np.int64), np.asarray(cls, np.int64))):
+        if not 0 <= f < T:
+            continue
+        lo, hi = max(int(f) - radius, 0), min(int(f) + radius + 1, T)
+        w, t = probs[lo:hi, c], np.arange(lo, hi, dtype=np.float64)
+        peak[k] = probs[f, c]
+        if w.sum() > 0:
+            mu = float((w * t).sum() / w.sum())
+            sigma[k] = float(np.sqrt((w * (t - mu) ** 2).sum() / w.sum()))
+    return sigma, peak

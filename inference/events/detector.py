@@ -27,7 +27,7 @@ from inference.clipio import BallTrack, HitEvents, PlayerTracks
 from inference.court import load_court
 
 from .classes import ClassSet
-from .decode import DecodeParams, decode
+from .decode import DecodeParams, decode, event_spread
 from .features import (
     FeatureConfig,
     check_label_block,
@@ -71,9 +71,11 @@ class EventResult:
         rally: the point's start/end (:mod:`.rally`); None when not segmented.
         outside: events judged outside the point (warm-up bounces, the ball after it); ``events`` holds
             them too unless ``predict(..., keep_all=False)``.
-        uncertainty: ``(N,)`` per event of ``events``, frames: the uncertainty of a racket hit timed from the
-            flights on both sides of a gap in the track (``predict(..., bridge_gaps=True)``, :mod:`.gaps`); NaN
-            where the model's timing stands (always, by default).
+        uncertainty: ``(N,)`` per event of ``events``, frames at the clip's rate: the timing's standard deviation —
+            the spread of the model's probability around the event (:func:`~.decode.event_spread`), or for a racket
+            hit timed from the flights on both sides of a gap (``predict(..., bridge_gaps=True)``, :mod:`.gaps`)
+            the flights' uncertainty. NaN where unknown.
+        confidence: ``(N,)`` the model's probability of the event's class on its frame (NaN where unknown).
     """
 
     events: HitEvents
@@ -83,6 +85,18 @@ class EventResult:
     rally: RallySegment | None = None
     outside: HitEvents = field(default_factory=HitEvents.empty)
     uncertainty: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    confidence: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def events_with_timing(self) -> HitEvents:
+        """``events`` with two more columns for ``events.csv`` (docs/formats.md §9): ``confidence`` and
+        ``sigma_frames`` (:attr:`confidence`, :attr:`uncertainty`; empty where unknown)."""
+        n = len(self.events)
+        extra = dict(self.events.extra)
+        for name, v in (("confidence", self.confidence), ("sigma_frames", self.uncertainty)):
+            v = np.asarray(v, np.float64)
+            if len(v) == n:
+                extra[name] = np.array(["" if not np.isfinite(x) else f"{x:.2f}" for x in v], dtype=object)
+        return HitEvents(self.events.frame, self.events.event, extra)
 
 
 def default_weights(sport: str) -> Path:
@@ -288,17 +302,19 @@ class EventDetector:
             return EventResult(HitEvents.empty(), probs, self.class_set.classes)
         p_ref = self.ref_probs(ball, n_frames, fps, camera=camera, players=players, frames=frames)
         f_ref, cls = decode(p_ref, self.ref_fps or fps, self.class_set, self.decode_params)
+        spread, conf = event_spread(p_ref, f_ref, cls, self.decode_params.peak_radius)
+        spread = spread * (fps / self.ref_fps if self.ref_fps else 1.0)  # reference frames → clip frames
         frames_out = np.clip(from_ref_frames(f_ref, fps, self.ref_fps), 0, n_frames - 1)
         xy = dense_xy(ball, n_frames)
         hit = np.isin(cls, [self.class_set.index(h) for h in self.class_set.rules.hits])
         bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height) if bridge_gaps else (
             frames_out, np.full(len(frames_out), np.nan))
         frames_out = np.where(hit, bridged, frames_out)  # racket hits in a gap: timed from both flights
-        sigma = np.where(hit, sigma, np.nan)
+        sigma = np.where(hit & np.isfinite(sigma), sigma, spread)  # else: the model's own spread
         order = np.argsort(frames_out, kind="stable")
-        frames_out, cls, sigma = frames_out[order], cls[order], sigma[order]
+        frames_out, cls, sigma, conf = frames_out[order], cls[order], sigma[order], conf[order]
         events, coarse = self._fine_events(frames_out, cls, ball, n_frames, camera)
-        sigma = sigma[:len(events)]
+        sigma, conf = sigma[:len(events)], conf[:len(events)]
         probs = probs_to_clip(p_ref, n_frames, fps, self.ref_fps)
         hits = self.class_set.rules.hits
         seg = segment_rally(xy, fps, events.frame, events.event, hits=hits, aspect=width / height,
@@ -309,8 +325,8 @@ class EventDetector:
         if not keep_all:
             events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
             coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
-            sigma = sigma[seg.inside]
-        return EventResult(events, probs, self.class_set.classes, coarse, seg, outside, sigma)
+            sigma, conf = sigma[seg.inside], conf[seg.inside]
+        return EventResult(events, probs, self.class_set.classes, coarse, seg, outside, sigma, conf)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,

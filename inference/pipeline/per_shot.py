@@ -55,7 +55,7 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
     C = det.class_set.n
     probs = np.zeros((n_frames, C))
     probs[:, 0] = 1.0
-    ev_f, ev_l, coarse, sigma = [], [], [], []
+    ev_f, ev_l, coarse, sigma, conf = [], [], [], [], []
     for a, b in spans:
         sub = shot_rows(ball, a, b)
         if not np.any(sub.visibility > 0):  # no ball in this view: nothing to decode
@@ -68,9 +68,11 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
         ev_l.append(r.events.event)
         coarse += list(r.coarse)
         sigma.append(r.uncertainty)
+        conf.append(r.confidence)
     frame = np.concatenate(ev_f).astype(np.int64) if ev_f else np.zeros(0, np.int64)
     label = np.concatenate(ev_l) if ev_l else np.zeros(0, str)
     unc = np.concatenate(sigma) if sigma else np.zeros(0)
+    cf = np.concatenate(conf) if conf else np.zeros(0)
     xy = dense_xy(ball, n_frames)
     off = np.ones(n_frames, bool)
     for a, b in spans:
@@ -81,7 +83,7 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
     outside = HitEvents(frame[~seg.inside], label[~seg.inside])
     keep = np.ones(len(frame), bool) if keep_all else seg.inside
     return EventResult(HitEvents(frame[keep], label[keep]), probs, det.class_set.classes,
-                       tuple(c for c, k in zip(coarse, keep) if k), seg, outside, unc[keep])
+                       tuple(c for c, k in zip(coarse, keep) if k), seg, outside, unc[keep], cf[keep])
 
 
 def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frames: int | None = None):

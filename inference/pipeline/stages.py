@@ -315,7 +315,7 @@ def _events_run(ctx: Context) -> Outcome:
                                      keep_all=not ctx.cfg.rally_only)
     finally:
         frames.close()
-    clip.write_events(result.events)
+    clip.write_events(result.events_with_timing())  # + confidence, sigma_frames (docs/formats.md §9)
     _write_rally(clip, result)
     counts: dict[str, int] = {}
     for e in result.events.event:

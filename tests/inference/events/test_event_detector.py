@@ -34,8 +34,9 @@ def test_shipped_padel_default_finds_events_on_held_out_clips(clips):
 
 
 def test_hits_in_gaps_keep_the_models_timing_unless_bridging_is_asked(clips):
-    """Racket hits hidden by the tracker: by default the model's own frame stands (no uncertainty given);
-    ``bridge_gaps=True`` times them from the flights on both sides of the gap and says how sure it is."""
+    """Racket hits hidden by the tracker: by default the model's own frame stands, with the spread of its
+    probability as the timing uncertainty; ``bridge_gaps=True`` times them from the flights on both sides of
+    the gap and gives the flights' uncertainty instead."""
     det = EventDetector.from_checkpoint(None, sport="padel")
     moved = 0
     for c in clips:
@@ -47,9 +48,13 @@ def test_hits_in_gaps_keep_the_models_timing_unless_bridging_is_asked(clips):
         plain = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)
         bridged = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames,
                               bridge_gaps=True)
-        assert np.isnan(plain.uncertainty).all()
+        radius = det.decode_params.peak_radius * c.fps / det.ref_fps
+        assert len(plain.uncertainty) == len(plain.confidence) == len(plain.events)
+        assert np.all((plain.uncertainty >= 0) & (plain.uncertainty <= radius))
+        assert np.all((plain.confidence > 0) & (plain.confidence <= 1))
         assert np.array_equal(plain.probs, bridged.probs)
-        moved += int(np.isfinite(bridged.uncertainty).sum())
+        moved += int((~np.isclose(bridged.uncertainty, plain.uncertainty)).sum()) if len(bridged.events) == len(
+            plain.events) else 1
     assert moved > 0
 
 
@@ -127,3 +132,31 @@ def test_cli_writes_events_csv(clips, tmp_path):
     outside = yaml.safe_load((clip.root / "rally.yaml").read_text())["outside"]
     assert main(["events", str(clip.root), "--rally-only"]) == 0
     assert len(read_events_csv(clip.events_path)) == len(events) - len(outside)
+
+
+def test_event_spread_is_small_for_a_sharp_peak_and_large_for_a_flat_one():
+    from inference.events.decode import event_spread
+
+    p = np.zeros((30, 3))
+    p[:, 0] = 1.0
+    p[10, :] = [0.05, 0.95, 0.0]  # sharp
+    p[19:24, :] = [[0.6, 0.0, 0.4]] * 5  # flat over 5 frames
+    sigma, peak = event_spread(p, np.array([10, 21, 40]), np.array([1, 2, 1]), radius=3)
+    assert sigma[0] == 0.0 and peak[0] == 0.95
+    assert np.isclose(sigma[1], np.sqrt(2.0)) and peak[1] == 0.4  # uniform over 21 ± 2
+    assert np.isnan(sigma[2]) and np.isnan(peak[2])  # outside the clip
+
+
+def test_events_csv_carries_confidence_and_timing_and_reads_back(clips, tmp_path):
+    from inference.clipio import read_events_csv, write_events_csv
+
+    det = EventDetector.from_checkpoint(None, sport="padel")
+    c = clips[0]
+    r = det.predict(c.ball, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)
+    path = write_events_csv(tmp_path / "events.csv", r.events_with_timing())
+    header = path.read_text().splitlines()[0].split(",")
+    assert header == ["frame", "event", "confidence", "sigma_frames"]
+    back = read_events_csv(path)
+    assert np.array_equal(back.frame, r.events.frame) and np.array_equal(back.event, r.events.event)
+    assert np.allclose(back.extra["confidence"].astype(float), r.confidence, atol=0.006)
+    assert np.allclose(back.extra["sigma_frames"].astype(float), r.uncertainty, atol=0.006)
