@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -227,6 +227,10 @@ class EventDetector:
     def ref_fps(self) -> float | None:
         return self.features.ref_fps
 
+    def rally_params(self) -> RallyParams:
+        """The sport's rally-segmentation constants, told whether this model times its hits (the taggers)."""
+        return replace(RallyParams.for_sport(self.class_set.sport), hits_timed=self.kind == "tagger")
+
     @property
     def wants_players(self) -> bool:
         """Whether the model reads the players (a player-aware HitNet); it still runs without them."""
@@ -318,7 +322,7 @@ class EventDetector:
         probs = probs_to_clip(p_ref, n_frames, fps, self.ref_fps)
         hits = self.class_set.rules.hits
         seg = segment_rally(xy, fps, events.frame, events.event, hits=hits, aspect=width / height,
-                            params=rally or RallyParams.for_sport(self.class_set.sport),
+                            params=rally or self.rally_params(),
                             hit_prob=probs[:, [self.class_set.index(h) for h in hits]].sum(axis=1), camera=camera,
                             sides=CourtSides.from_court(self.court) if self.court is not None else None)
         outside = HitEvents(events.frame[~seg.inside], events.event[~seg.inside])

@@ -50,7 +50,7 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
     """
     from inference.events.detector import EventResult
     from inference.events.features import dense_xy
-    from inference.events.rally import RallyParams, segment_rally
+    from inference.events.rally import segment_rally
 
     C = det.class_set.n
     probs = np.zeros((n_frames, C))
@@ -79,7 +79,7 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
         off[a:b] = False
     xy[off] = np.nan
     seg = segment_rally(xy, fps, frame, label, hits=det.class_set.rules.hits, aspect=width / height,
-                        params=RallyParams.for_sport(det.class_set.sport))
+                        params=det.rally_params())
     outside = HitEvents(frame[~seg.inside], label[~seg.inside])
     keep = np.ones(len(frame), bool) if keep_all else seg.inside
     return EventResult(HitEvents(frame[keep], label[keep]), probs, det.class_set.classes,

@@ -400,3 +400,22 @@ def test_a_serve_before_the_alternating_hits_on_the_servers_side_is_the_warm_up(
     monkeypatch.setattr(rally, "find_serve", lambda *a, **k: (30, "model"))
     seg = rally.segment_rally(xy, fps, frames, labels)
     assert seg.start == serve and seg.serve_source == ("chain" if serve == 100 else "model")
+
+
+def test_a_model_that_times_its_hits_keeps_the_chains_first_hit_over_a_later_track_serve(monkeypatch):
+    """The track's launch test finds a 'serve' after the first hit of the alternating run (its bounce, a glass):
+    a HitNet's serve is often early, so the track's frame stands; the taggers time their hits, so the hit does."""
+    import inference.events.rally as rally_mod
+
+    monkeypatch.setattr(rally_mod, "find_serve", lambda *a, **k: (135, "track"))
+    xy = np.full((400, 2), 0.5)
+    frames = np.array([20, 108, 161, 182, 236, 291, 343])
+    labels = ["ground", "player_far", "ground", "player_near", "ground", "player_far", "ground"]
+    base = rally_mod.RallyParams.for_sport("padel")
+    kept = rally_mod.segment_rally(xy, 50.0, frames, labels, params=base)
+    assert (kept.start, kept.serve_source) == (135, "track")
+    timed = rally_mod.segment_rally(xy, 50.0, frames, labels, params=dataclasses.replace(base, hits_timed=True))
+    assert (timed.start, timed.serve_source) == (108, "chain")
+    assert not timed.inside[0] and timed.inside[1]  # a warm-up bounce 1.8 s before stays outside the point
+    assert EventDetector.from_checkpoint("inference/weights/tagger_padel_players.pth.tar").rally_params().hits_timed
+    assert not EventDetector.from_checkpoint(None, sport="padel").rally_params().hits_timed
