@@ -24,7 +24,7 @@ from bench_events_players import GAPS  # bench/ is the script's folder
 
 def main(argv=None) -> None:
     from inference.events import EventDetector
-    from inference.events.detector import choose_weights
+    from inference.events.detector import choose_weights, has_players
     from inference.events.metrics import tolerance_frames
     from training.events.degrade import DegradeConfig, degrade_all
     from training.events.pose_noise import PoseNoiseConfig, noisy_all
@@ -43,7 +43,7 @@ def main(argv=None) -> None:
     clips = simulate_clips(args.sport, args.clips, 6161, args.cache, progress=False, fps=50.0, players=True)
     players = noisy_all(clips, 17, PoseNoiseConfig.from_file(args.pose_noise))
     tracks = degrade_all(clips, 11, DegradeConfig.from_dict(GAPS))
-    path = choose_weights(args.weights, args.sport, players[0])
+    path = choose_weights(args.weights, args.sport, next((p for p in players if has_players(p)), None))
     det = EventDetector.from_checkpoint(path, sport=args.sport)
     cs = det.class_set
     rows = []  # (sigma, confidence, |error| in frames)
@@ -58,7 +58,7 @@ def main(argv=None) -> None:
     tol = tolerance_frames(50.0)
     print(f"\n{args.sport}, {len(clips)} held-out rallies, real-tracker-like ball with gaps at the contacts, players "
           f"through {args.pose_noise}; {Path(path).name}; {len(a)} events, tolerance ±{tol} frames\n")
-    for name, col, hi_first in (("sigma_frames", 0, False), ("confidence", 1, True)):
+    for name, col in (("sigma_frames", 0), ("confidence", 1)):
         q = np.quantile(a[:, col], [0, 0.25, 0.5, 0.75, 1.0])
         print(f"| {name} quarter | range | events | within ±{tol} | off by {tol + 1}–5 | further or none |")
         print("|---|---|---|---|---|---|")

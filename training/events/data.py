@@ -12,6 +12,7 @@ Sources of clips (``EventDataModule``):
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from inference.clipio import BallTrack, Clip, FormatError
+from inference.clipio import BallTrack, Clip, FormatError, PlayerTracks
 from inference.court import load_court
 from inference.events.classes import ClassSet
 from inference.events.features import (FeatureConfig, check_label_block, clip_features, make_windows, to_ref_frames,
@@ -73,19 +74,16 @@ def label_clips(clips: list[SimClip], class_set: ClassSet, features: FeatureConf
 
 
 def with_tracks(clips: list[LabelledClip], tracks: list[BallTrack], features: FeatureConfig, court=None,
-                players=None, workers: int = 0) -> list[LabelledClip]:
-    """The same clips and labels with other ball tracks (e.g. degraded ones), and other players when
-    ``players`` is given: features recomputed. ``players``: one per clip, or a function of the clip's index
-    that draws them (then drawn in the workers; the returned clips keep their own ``sim.players``)."""
+                players: Callable[[int], PlayerTracks | None] | None = None, workers: int = 0) -> list[LabelledClip]:
+    """The same clips and labels with other ball tracks (e.g. degraded ones): features recomputed, with the
+    players ``players(k)`` draws for clip k when given (drawn in the workers; the returned clips keep their own
+    ``sim.players``)."""
     def job(k: int) -> np.ndarray:
         s = clips[k].sim
-        pl = s.players if players is None else (players(k) if callable(players) else players[k])
+        pl = s.players if players is None else players(k)
         return clip_features(tracks[k], s.n_frames, s.fps, features, camera=s.camera, court=court, players=pl)
 
-    feats = map_clips(job, len(clips), workers)
-    if players is not None and not callable(players):
-        return [LabelledClip(replace(lc.sim, players=p), f, lc.y) for lc, p, f in zip(clips, players, feats)]
-    return [LabelledClip(lc.sim, f, lc.y) for lc, f in zip(clips, feats)]
+    return [LabelledClip(lc.sim, f, lc.y) for lc, f in zip(clips, map_clips(job, len(clips), workers))]
 
 
 def clips_from_folder(root, split: str, seed: int = 0, sources=None) -> list[SimClip]:

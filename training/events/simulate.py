@@ -145,12 +145,15 @@ def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None =
             with open(cache, "rb") as fh:
                 return pickle.load(fh)
     court = load_court(sport)
+
+    def one(k: int) -> SimClip:
+        return simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players)
+
     if workers and workers > 1 and can_fork():
         log.info("simulating %d %s rallies in %d processes", n, sport, workers)
-        clips = map_clips(lambda k: simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players), n, workers)
+        clips = map_clips(one, n, workers)
     else:
-        clips = [simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players)
-                 for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
+        clips = [one(k) for k in tqdm(range(n), desc=f"simulating {sport} rallies", disable=not progress)]
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
         tmp = private_temp_path(cache)  # DDP ranks may simulate the same set at once
