@@ -592,3 +592,44 @@ def calibrate_court(
                                                            if n not in image_points and n not in off]
     return calibrate(world, image, image_size, names=names, model=model, n_dist=n_dist, suggest=suggest,
                      principal_point=principal_point)
+
+
+def court_view_problems(camera: Camera, court: Court) -> list[str]:
+    """What makes ``camera`` unusable for ``court`` ([] when none): the court behind the camera, no part of
+    the court's floor inside the picture, a focal length no lens has, a camera under the floor.
+
+    The floor is sampled on a 1 m grid over the playing area; a camera that sees none of it cannot place
+    a ball or a player, whatever its residuals say.
+    """
+    w, h = (int(v) for v in camera.image_size)
+    problems = []
+    f = float(camera.K[0, 0])
+    if not (0.1 * max(w, h) <= abs(f) <= 50.0 * max(w, h)):
+        problems.append(f"its focal length is {f:.3g} px, which no lens gives on {w}×{h} frames "
+                        f"(expected {0.1 * max(w, h):.0f}–{50 * max(w, h):.0f} px)")
+    if camera.centre[2] <= 0:
+        problems.append(f"it stands {camera.centre[2]:.2f} m high (under the floor)")
+    xs = np.linspace(0, court.size[0], max(2, int(np.ceil(court.size[0])) + 1))
+    ys = np.linspace(0, court.size[1], max(2, int(np.ceil(court.size[1])) + 1))
+    floor = np.array([(x, y, 0.0) for x in xs for y in ys])
+    front = camera.depth(floor) > 0
+    if not front.any():
+        problems.append("the court is behind it (the camera looks away from the court)")
+    else:
+        px = camera.project(floor[front])
+        inside = np.isfinite(px).all(1) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+        if not inside.any():
+            problems.append("no part of the court's floor falls inside the picture")
+    return problems
+
+
+def require_court_view(camera: Camera, court: Court, path) -> None:
+    """Raise :class:`~inference.clipio.errors.FormatError` naming ``path`` when ``camera`` cannot see
+    ``court`` (:func:`court_view_problems`)."""
+    problems = court_view_problems(camera, court)
+    if problems:
+        from inference.clipio.errors import FormatError
+
+        raise FormatError(path, "this camera cannot see the court: " + "; ".join(problems),
+                          fix="check that the file belongs to this video, or calibrate again (rally3d calibrate "
+                          "from clicked court points, or --court-points auto)")

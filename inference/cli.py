@@ -8,6 +8,7 @@ sets ``func`` (called with the parsed namespace, returning an exit code). The di
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from importlib.metadata import entry_points
 
@@ -31,9 +32,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _subparser(parser: argparse.ArgumentParser, name: str | None) -> argparse.ArgumentParser | None:
+    """The subparser of command ``name`` (None when unknown)."""
+    for action in parser._subparsers._group_actions if parser._subparsers else []:
+        if isinstance(action, argparse._SubParsersAction) and name in action.choices:
+            return action.choices[name]
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # argparse would name the top-level usage; the subcommand's usage is the useful one
+        sub = _subparser(parser, getattr(args, "command", None))
+        (sub or parser).error(f"unrecognized arguments: {' '.join(unknown)}")
     if not getattr(args, "func", None):
         parser.print_help()
         return 0 if args.command is None else 2
@@ -41,7 +53,9 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return int(args.func(args) or 0)
-    except (FormatError, FileNotFoundError, KeyError, ValueError, RuntimeError) as e:
+    except (FormatError, OSError, KeyError, ValueError, RuntimeError) as e:
+        if os.environ.get("RALLY3D_DEBUG"):  # the traceback, for a bug report
+            raise
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
         print(f"rally3d {args.command}: error: {msg}", file=sys.stderr)
         return 1

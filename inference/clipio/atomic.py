@@ -10,6 +10,8 @@ import secrets
 import shutil
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -94,3 +96,64 @@ def backup_file(path: str | Path, folder: str | Path) -> Path:
         n += 1
     shutil.copy2(path, dest)
     return dest
+
+
+BACKUP_DIR = Path(".rally3d") / "backup"
+"""Where a replaced file's previous version goes, relative to the folder that holds the file."""
+
+
+@dataclass(frozen=True)
+class Replaced:
+    """What :func:`replace_keeping_backup` did.
+
+    Attributes:
+        path: the file written.
+        backup: the copy of the previous version (None when there was none, or it was identical).
+        changed: False when the new content equals the old one (nothing was touched).
+    """
+
+    path: Path
+    backup: Path | None
+    changed: bool
+
+    def line(self, command: str = "rally3d") -> str | None:
+        """``<command>: <file> replaced; the previous version is kept in <copy>`` (None: nothing to say)."""
+        if self.backup is None:
+            return None
+        return f"{command}: {self.path} replaced; the previous version is kept in {self.backup}"
+
+
+def replace_keeping_backup(path: str | Path, write: Callable[[Path], object], *,
+                           backup_dir: str | Path | None = None, log: Callable[[str], object] | None = print,
+                           command: str = "rally3d") -> Replaced:
+    """The one rule for commands that write a file a person may have edited (ball.csv, events.csv,
+    court_points.csv, camera.yaml, players.csv …): never lose the previous version.
+
+    ``write(tmp)`` writes the new file at a temporary path beside ``path``; when ``path`` exists with
+    other content, it is first copied to ``backup_dir`` (default ``<folder of path>/.rally3d/backup``,
+    named ``<name>.<timestamp>``), then the new file replaces it atomically, and ``log`` says so in one
+    line. Identical content leaves the old file (and its modification time) alone.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = private_temp_path(path)
+    try:
+        write(tmp)
+        if path.is_file() and _same_bytes(path, tmp):
+            return Replaced(path, None, False)
+        copy = None
+        if path.is_file():
+            copy = backup_file(path, backup_dir if backup_dir is not None else path.parent / BACKUP_DIR)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    result = Replaced(path, copy, True)
+    if log is not None and result.line(command):
+        log(result.line(command))
+    return result
+
+
+def _same_bytes(a: Path, b: Path) -> bool:
+    if a.stat().st_size != b.stat().st_size:
+        return False
+    return a.read_bytes() == b.read_bytes()

@@ -141,6 +141,9 @@ def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
     if idx[-1] != n - 1:
         idx.append(n - 1)
     samples = court_line_samples(camera, court)
+    rms = camera.rms_px if camera.rms_px is not None else 0.0
+    if not len(samples):  # no court line in the picture: nothing to measure against (every frame "not found")
+        return DriftReport(idx, np.zeros((len(idx), 2)), np.zeros(len(idx)), max(MIN_DRIFT_PX, 2 * rms), fps)
     rects = clip_mask(clip)
     shifts, support = [], []
     with clip.frames(cache_size=0) as src:
@@ -148,7 +151,6 @@ def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
             s, sup = frame_shift(apply_mask(src.read(i), rects), samples, max_shift_px)
             shifts.append(s)
             support.append(sup)
-    rms = camera.rms_px if camera.rms_px is not None else 0.0
     return DriftReport(idx, np.array(shifts).reshape(-1, 2), np.array(support), max(MIN_DRIFT_PX, 2 * rms), fps)
 
 

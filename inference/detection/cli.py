@@ -32,19 +32,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--crop", choices=["auto", "off"], default="auto",
                    help="auto (default): the full frame only to find the ball, then a quarter-size window "
                    "around where the tracker expects it; off: the full frame everywhere")
-    p.add_argument("--out", type=Path, help="write here instead of the clip's ball.csv")
+    p.add_argument("--out", type=Path, help="write here instead of the clip's ball.csv (an existing file is backed "
+                   "up in .rally3d/backup/ beside it, as the clip's ball.csv is)")
+    from inference.clipio.span import add_span_arguments
+
+    add_span_arguments(p, "detect the ball")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from inference.clipio import Clip, write_ball_csv
+    from inference.clipio import Clip, read_ball_csv, write_ball_csv
+    from inference.clipio.atomic import replace_keeping_backup
+    from inference.clipio.span import merge_span, span_of
 
     from .crop import crop_config
     from .detect import SHIPPED_SPORT, BallDetectorRunner, shipped_weights
 
     clip = Clip(args.clip)
+    span = span_of(args)
+    active = span.mask(clip.info.fps, clip.n_frames) if span.active else None
+    target = args.out or clip.ball_path
+    old = read_ball_csv(target) if active is not None and target.is_file() else None  # a bad file fails now
     weights = args.weights
     if weights is None:
         model = args.model or "wasb"
@@ -56,10 +66,18 @@ def run(args: argparse.Namespace) -> int:
     runner = BallDetectorRunner.from_weights(args.model, weights, trust=args.trust_checkpoint,
                                              step=args.step, batch_size=args.batch_size, backend=args.backend,
                                              crop=crop_config(args.crop))
-    result = runner.run(clip, progress=True)
-    path = write_ball_csv(args.out or clip.ball_path, result.track)
-    seen = int(np.sum(result.track.visibility == 1))
-    print(f"{clip.root.name}: ball detected in {seen} of {result.n_frames} frames, {result.fps:.1f} frames/s "
+    result = runner.run(clip, progress=True, active=active)
+    track = result.track
+    if active is not None:  # the stretch's rows replace those of the existing file; the others are kept
+        first, stop = span.frames(clip.info.fps, clip.n_frames)
+        track = merge_span(old if old is not None else track.empty(), track, first, stop)
+        print(f"detect: {span.describe(clip.info.fps, clip.n_frames)} only")
+        seen = int(np.sum(track.visibility[(track.frame >= first) & (track.frame < stop)] == 1))
+        n_done = stop - first
+    else:
+        seen, n_done = int(np.sum(track.visibility == 1)), result.n_frames
+    path = replace_keeping_backup(target, lambda tmp: write_ball_csv(tmp, track), command="rally3d detect").path
+    print(f"{clip.root.name}: ball detected in {seen} of {n_done} frames, {result.fps:.1f} frames/s "
           f"(network {result.n_frames / max(result.seconds_network, 1e-9):.1f} frames/s, {args.backend}; windows: "
           f"{_windows(result.windows)}); wrote {path}")
     return 0

@@ -24,21 +24,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "clip's players.csv when present)")
     p.add_argument("--no-players", action="store_true", help="ignore players.csv (events from the ball alone)")
     p.add_argument("--no-camera", action="store_true", help="ignore camera.yaml (grouped classes → default label)")
-    p.add_argument("--out", type=Path, help="write here instead of the clip's events.csv")
+    p.add_argument("--out", type=Path, help="write here instead of the clip's events.csv (an existing file is "
+                   "backed up in .rally3d/backup/ beside it, as the clip's events.csv is)")
     p.add_argument("--rally-only", action="store_true",
                    help="leave the events judged outside the point (warm-up bounces, the ball after it) out of "
                    "events.csv; rally.yaml lists them either way")
+    from inference.clipio.span import add_span_arguments
+
+    add_span_arguments(p, "find events")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from inference.clipio import Clip, FormatError, read_ball_csv, write_events_csv
+    from inference.clipio import Clip, FormatError, read_ball_csv, read_events_csv, write_events_csv
+    from inference.clipio.atomic import replace_keeping_backup
+    from inference.clipio.span import merge_span, span_of
 
     from .detector import PLAYERS_OPTIONAL, EventDetector, choose_weights
 
     clip = Clip(args.clip)
     info = clip.info
     ball = read_ball_csv(args.ball) if args.ball else clip.read_ball()
+    span = span_of(args)
+    target = args.out or clip.events_path
+    old = read_events_csv(target) if span.active and target.is_file() else None  # a bad file fails now
     camera = None
     if not args.no_camera:
         for gt in (False, True):
@@ -48,6 +57,12 @@ def run(args: argparse.Namespace) -> int:
             except (FileNotFoundError, OSError, FormatError):
                 continue
     n_frames = info.n_frames or (int(ball.frame[-1]) + 1 if len(ball) else 0)
+    if span.active:
+        n_frames = info.n_frames or clip.n_frames
+        first, stop = span.frames(info.fps, n_frames)
+        inside = (ball.frame >= first) & (ball.frame < stop)
+        ball = merge_span(ball.empty(), ball, first, stop)  # the model sees the stretch's ball only
+        print(f"events: {span.describe(info.fps, n_frames)} only ({int(inside.sum())} ball rows)")
     players = None if args.no_players else read_players_arg(clip, args.players, n_frames)
     det = EventDetector.from_checkpoint(choose_weights(args.weights, info.sport, players), sport=info.sport)
     frames = clip.frames(cache_size=0) if det.kind == "crop" else None  # the crop model looks at the video
@@ -57,12 +72,19 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if frames is not None:
             frames.close()
-    path = write_events_csv(args.out or clip.events_path, result.events_with_timing())
-    from .rally import write_rally_yaml
+    events = result.events_with_timing()
+    if span.active:
+        events = merge_span(old if old is not None else events.empty(), events, first, stop)
+    path = replace_keeping_backup(target, lambda tmp: write_events_csv(tmp, events), command="rally3d events").path
+    from .rally import rally_summary, write_rally_yaml
 
-    rally_path = write_rally_yaml(path.parent / "rally.yaml", result.rally, info.fps,
-                                  list(zip(result.outside.frame.tolist(), result.outside.event.tolist())))
-    from .rally import rally_summary
+    if span.active:  # the point's start and end are judged on the whole clip
+        rally_path = "no rally.yaml (--start/--end: run without them to segment the point)"
+    else:
+        outside = list(zip(result.outside.frame.tolist(), result.outside.event.tolist()))
+        rally_path = replace_keeping_backup(
+            path.parent / "rally.yaml", lambda tmp: write_rally_yaml(tmp, result.rally, info.fps, outside),
+            command="rally3d events").path
 
     counts = {}
     for e in result.events.event:

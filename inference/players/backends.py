@@ -14,11 +14,12 @@ backends also ``infer(image) -> Persons`` for one RGB frame.
 from __future__ import annotations
 
 import importlib.util
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from inference.shots import segments
 
 from .types import J, Persons, PoseSequence
 
@@ -40,11 +41,16 @@ class ImportBackend:
             return False, f"predictions file {self.path} not found; pass --predictions FILE"
         return True, ""
 
-    def run(self, clip, progress: bool = True) -> PoseSequence:
+    def run(self, clip, progress: bool = True, active: np.ndarray | None = None) -> PoseSequence:
+        """The predictions of every frame (``active`` ``(N,) bool``: only these frames, the others empty)."""
         from .importers import load_predictions
 
-        return load_predictions(self.path, n_frames=clip.n_frames, fmt=self.fmt,
-                                image_size=(clip.info.width, clip.info.height))
+        poses = load_predictions(self.path, n_frames=clip.n_frames, fmt=self.fmt,
+                                 image_size=(clip.info.width, clip.info.height))
+        if active is None:
+            return poses
+        kept = [p if i < len(active) and active[i] else Persons.empty() for i, p in enumerate(poses.frames)]
+        return PoseSequence(kept, poses.source)
 
 
 def _missing_modules(*names: str) -> list[str]:
@@ -66,20 +72,24 @@ class _FrameBackend:
     def infer(self, image: np.ndarray) -> Persons:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def run(self, clip, progress: bool = True) -> PoseSequence:
+    def run(self, clip, progress: bool = True, active: np.ndarray | None = None) -> PoseSequence:
+        """Poses of every frame (``active`` ``(N,) bool``: only these frames are decoded and posed)."""
         ok, reason = self.available()
         if not ok:
             raise BackendUnavailable(f"pose backend {self.name!r} is unavailable: {reason}")
         from tqdm import tqdm
 
         with clip.frames() as frames:
-            out = [self.infer(img) for img in tqdm(_iterate(frames), total=len(frames), desc=f"pose {self.name}",
-                                                   unit="frame", disable=not progress)]
+            n = len(frames)
+            out = [Persons.empty() for _ in range(n)]
+            runs = [(0, n)] if active is None else segments(np.asarray(active, bool)[:n])
+            with tqdm(total=sum(b - a for a, b in runs), desc=f"pose {self.name}", unit="frame",
+                      disable=not progress) as bar:
+                for a, b in runs:
+                    for i, img in enumerate(frames.iter(a, b), start=a):
+                        out[i] = self.infer(img)
+                        bar.update()
         return PoseSequence(out, self.name)
-
-
-def _iterate(frames) -> Iterator[np.ndarray]:
-    yield from frames.iter()
 
 
 @dataclass

@@ -26,13 +26,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, help="movenet: the MultiPose Lightning .tflite file")
     p.add_argument("--tracker", choices=TRACKERS, default="ocsort")
     p.add_argument("--gt-camera", action="store_true", help="use gt/camera.yaml instead of camera.yaml")
+    p.add_argument("--out", type=Path, help="write here instead of the clip's players.csv (an existing file is "
+                   "backed up in .rally3d/backup/ beside it, as the clip's players.csv is)")
+    from inference.clipio.span import add_span_arguments
+
+    add_span_arguments(p, "track the players")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from inference.clipio import Clip
+    from inference.clipio import Clip, read_players_csv, write_players_csv
+    from inference.clipio.atomic import replace_keeping_backup
+    from inference.clipio.span import merge_span, span_of
     from inference.court import load_court
 
     from .backends import BackendUnavailable, make_backend
@@ -46,9 +53,18 @@ def run(args: argparse.Namespace) -> int:
     ok, reason = backend.available()
     if not ok:
         raise BackendUnavailable(f"pose backend {args.pose!r}: {reason}")
-    poses = backend.run(clip)
+    span = span_of(args)
+    target = args.out or clip.players_path
+    old = read_players_csv(target) if span.active and target.is_file() else None  # a bad file fails now
+    active = span.mask(clip.info.fps, clip.n_frames) if span.active else None
+    poses = backend.run(clip, active=active)
     players = players_from_poses(poses, camera, court, clip.info.fps, TrackingConfig(tracker=args.tracker))
-    path = clip.write_players(players)
+    if span.active:
+        first, stop = span.frames(clip.info.fps, clip.n_frames)
+        print(f"players: {span.describe(clip.info.fps, clip.n_frames)} only")
+        players = merge_span(old if old is not None else players.empty(), players, first, stop)
+    path = replace_keeping_backup(target, lambda tmp: write_players_csv(tmp, players),
+                                  command="rally3d players").path
     n_det = sum(len(p) for p in poses.frames)
     print(f"{clip.root.name}: {n_det} detections in {len(poses)} frames → {len(players.ids())} players")
     for pid in players.ids():

@@ -47,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--size must look like 1280x720, got {args.size!r}") from None
     if args.clips < 1:
         raise ValueError("--clips must be >= 1")
+    check_out_folder(args.out)
     config = SynthConfig(sport=args.sport, camera=args.camera, randomise_camera=not args.fixed_camera,
                          fps=args.fps, width=width, height=height, randomise_look=not args.plain,
                          codec=args.codec, click_noise_px=args.click_noise, max_frames=args.max_frames,
@@ -62,3 +63,27 @@ def run(args: argparse.Namespace) -> int:
         manifest = generate_dataset(args.out, args.clips, args.seed, config, progress=progress)
     print(f"wrote {len(manifest.clips)} clips ({frames[0]} frames) to {args.out}: {manifest.counts()}")
     return 0
+
+
+def check_out_folder(out: Path) -> None:
+    """Refuse an ``--out`` that is a file, or a folder holding clips that ``rally3d synth`` did not make
+    (a person's labelled clips must never be overwritten by generated ones).
+
+    Raises:
+        ValueError: naming the path and the fix.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file, not a folder: name a new or empty folder for the dataset")
+    if not out.is_dir():
+        return
+    for clip_yaml in sorted(out.glob("*/clip.yaml")):
+        try:
+            import yaml
+
+            made_here = "synth" in (yaml.safe_load(clip_yaml.read_text(encoding="utf-8")) or {})
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError):
+            made_here = False
+        if not made_here:
+            raise ValueError(f"--out {out} holds clips that rally3d synth did not make ({clip_yaml.parent.name}); "
+                             "generated clips would overwrite them: name a new or empty folder")
