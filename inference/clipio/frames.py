@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from .errors import FormatError
-from .probe import COMB_THRESHOLD, comb_score, deinterlace, probe_video_file
+from .probe import COMB_THRESHOLD, Resampling, comb_score, deinterlace, probe_video_file
 
 log = logging.getLogger(__name__)
 
@@ -152,8 +152,9 @@ class VideoFrames(FrameSource):
     """Frames of a video file, decoded with OpenCV, presented at one constant rate and progressive.
 
     The container is probed first (:mod:`.probe`, PyAV): its frame count and timestamps are taken from the
-    packets, a variable frame rate is resampled to a constant one (nearest timestamp) and interlaced video
-    is deinterlaced. ``notes`` says what was done (also logged, level INFO).
+    packets, a variable frame rate is resampled to the nominal rate (nearest timestamp; ``resampling`` says
+    which frames were repeated and dropped) and interlaced video is deinterlaced. ``notes`` says what was
+    done (also logged, level INFO).
     """
 
     def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
@@ -172,10 +173,12 @@ class VideoFrames(FrameSource):
         if self._pyav:
             self._n = self.probe.n_frames
         self._map: np.ndarray | None = None  # constant-rate frame → source frame (variable frame rate only)
+        self.resampling: Resampling | None = None
         if self.probe is not None and self.probe.vfr and self.fps:
             self._n = self.probe.n_frames  # the packets, not OpenCV's estimate
-            self._map = self.probe.cfr_map(self.fps)
-            self.notes.append(self.probe.timing_note(self.fps))
+            self.resampling = self.probe.resampling(self.fps)
+            self._map = self.resampling.source
+            self.notes.append(self.resampling.note())
         first = self._read_next(0)
         if self._n <= 0:
             self._n = self._count_frames()

@@ -6,8 +6,11 @@ Real footage is not always a tidy constant-rate progressive file: phones write *
 both so that :class:`~inference.clipio.frames.VideoFrames` can present every video the same way: frames at
 one constant rate (``i / fps`` is the time of frame ``i``), progressive.
 
-* VFR → resampled to the stated rate: frame ``i`` is the source frame whose timestamp is nearest to
-  ``t0 + i / fps`` (a gap repeats a frame, a burst drops frames), as ``ffmpeg -vsync cfr`` does.
+* VFR → resampled to the **nominal** rate (:func:`nominal_rate`: the stream's ``r_frame_rate`` or guessed rate
+  when it is a standard rate that the frames' spacing confirms, not the container's average rate, which
+  dropped frames pull down: a 25 fps broadcast with dropped frames averages 21.5 fps): frame ``i`` is
+  the source frame whose timestamp is nearest to ``t0 + i / fps`` (a gap repeats a frame, a burst drops
+  frames), as ``ffmpeg -vsync cfr`` does. :class:`Resampling` says which.
 * interlaced → deinterlaced by :func:`deinterlace` (the first field is kept, the other interpolated).
 
 Example:
@@ -30,6 +33,17 @@ log = logging.getLogger(__name__)
 FIELD_ORDERS = {0: "unknown", 1: "progressive", 2: "tt", 3: "bb", 4: "tb", 5: "bt"}
 #: an interval between two frames more than this fraction off the median makes the timing irregular
 VFR_TOLERANCE = 0.25
+#: the usual camera and broadcast rates (frames/s); NTSC's are 1000/1001 of the round ones
+STANDARD_RATES = (15.0, 24000 / 1001, 24.0, 25.0, 30000 / 1001, 30.0, 48.0, 50.0, 60000 / 1001, 60.0, 90.0,
+                  100.0, 120000 / 1001, 120.0, 240.0)
+#: a rate within this fraction of a standard one is that rate (``2997/100`` is 29.97 fps)
+RATE_MATCH = 0.002
+#: a rate measured from the frames' spacing is snapped to a standard one this close (millisecond timestamps)
+SPACING_MATCH = 0.03
+#: two timestamps this close (s) are as near a grid time as each other (the time bases' rounding)
+TIE_S = 1e-6
+#: frame indices listed in notes and clip.yaml's ``timing`` (the counts are always complete)
+FIRST_FEW = 10
 #: comb score (see :func:`comb_score`) above which a progressive-looking frame is taken as interlaced
 COMB_THRESHOLD = 2.0
 
@@ -42,6 +56,7 @@ class VideoProbe:
         path: the file. codec, container: names as FFmpeg gives them.
         width, height: coded frame size (px).
         stated_fps: the rate the container states (average frame rate), None when it states none.
+        nominal_fps: the stream's nominal rate (:func:`nominal_rate`), None when none is standard.
         times_s: (N,) presentation time of every frame, sorted, seconds from the first frame.
         field_order: ``progressive``, ``tt``, ``bb``, ``tb``, ``bt`` (interlaced) or ``unknown``.
     """
@@ -54,6 +69,7 @@ class VideoProbe:
     stated_fps: float | None
     times_s: np.ndarray
     field_order: str
+    nominal_fps: float | None = None
 
     @property
     def n_frames(self) -> int:
@@ -67,7 +83,10 @@ class VideoProbe:
 
     @property
     def fps(self) -> float | None:
-        """The rate to present the frames at: the stated one, unless it is far from the measured one."""
+        """The rate to present the frames at: the nominal one when there is one, else the stated (average)
+        one, unless it is far from the measured one."""
+        if self.nominal_fps:
+            return self.nominal_fps
         m, s = self.measured_fps, self.stated_fps
         if s and (m is None or 0.5 * m <= s <= 2.0 * m):
             return s
@@ -91,22 +110,118 @@ class VideoProbe:
 
     def cfr_map(self, fps: float) -> np.ndarray:
         """(K,) source frame shown at each frame of a constant ``fps`` grid from the first to the last timestamp
-        (the nearest one in time; ties go to the earlier frame)."""
+        (the nearest one in time; ties, within :data:`TIE_S`, go to the earlier frame)."""
         t = self.times_s
         k = int(np.floor((t[-1] - t[0]) * fps + 0.5)) + 1
         grid = t[0] + np.arange(k) / fps
         j = np.clip(np.searchsorted(t, grid), 1, len(t) - 1)
-        return np.where(grid - t[j - 1] <= t[j] - grid, j - 1, j).astype(np.int64)
+        return np.where(grid - t[j - 1] <= t[j] - grid + TIE_S, j - 1, j).astype(np.int64)
+
+    def resampling(self, fps: float) -> Resampling:
+        """How the frames are presented at a constant ``fps`` (:meth:`cfr_map`)."""
+        return Resampling(self.path.name, float(fps), self.stated_fps, self.n_frames, self.cfr_map(fps),
+                          self.intervals_s)
 
     def timing_note(self, fps: float) -> str:
         """One line on how an irregular timing is presented (for the terminal and logs)."""
-        m = self.cfr_map(fps)
-        repeated = int(np.sum(np.diff(m) == 0))
-        dropped = int(self.n_frames - len(np.unique(m)))
+        return self.resampling(fps).note()
+
+
+@dataclass(frozen=True)
+class Resampling:
+    """A variable-frame-rate video presented at a constant rate.
+
+    Attributes:
+        name: the file's name. fps: the constant rate. average_fps: the container's average rate.
+        n_source: frames in the file. source: (K,) the file's frame shown at each clip frame.
+        intervals_s: (n_source - 1,) the file's frame intervals.
+    """
+
+    name: str
+    fps: float
+    average_fps: float | None
+    n_source: int
+    source: np.ndarray
+    intervals_s: np.ndarray
+
+    @property
+    def repeated(self) -> np.ndarray:
+        """Clip frames that show the same picture as the frame before (a gap in the file's timestamps)."""
+        return np.flatnonzero(np.diff(self.source) == 0) + 1
+
+    @property
+    def dropped(self) -> np.ndarray:
+        """The file's frames that no clip frame shows (a burst of timestamps)."""
+        return np.setdiff1d(np.arange(self.n_source), self.source)
+
+    def record(self, first: int = 0, stop: int | None = None) -> dict:
+        """clip.yaml's ``timing`` for clip frames ``first .. stop-1`` (renumbered from 0): the counts and the
+        first :data:`FIRST_FEW` frames repeated (clip frames) and dropped (the file's frames)."""
+        stop = len(self.source) if stop is None else stop
+        rep = self.repeated
+        rep = rep[(rep > first) & (rep < stop)] - first
+        drop = self.dropped
+        if first > 0 or stop < len(self.source):
+            drop = drop[(drop > self.source[first]) & (drop < self.source[stop - 1])]
+        out = {"variable_frame_rate": True, "fps": self.fps, "source_frames": self.n_source,
+               "repeated": len(rep), "repeated_frames": rep[:FIRST_FEW].tolist(),
+               "dropped": len(drop), "dropped_source_frames": drop[:FIRST_FEW].tolist()}
+        if self.average_fps:
+            out["average_fps"] = round(float(self.average_fps), 3)
+        return out
+
+    def note(self) -> str:
+        """One line for the terminal and logs: the rates, the counts, the first frames repeated and dropped."""
         d = self.intervals_s * 1000
-        return (f"{self.path.name}: variable frame rate (frame intervals {d.min():.1f}–{d.max():.1f} ms): "
-                f"resampled to a constant {fps:g} fps by nearest timestamp — {self.n_frames} frames → {len(m)} "
-                f"({repeated} repeated, {dropped} dropped); frame i is at i / {fps:g} s")
+        spread = f"frame intervals {d.min():.1f}–{d.max():.1f} ms" if len(d) else "one frame"
+        avg = self.average_fps
+        average = f"; the container's average {avg:.2f} fps is not used" \
+            if avg and abs(avg / self.fps - 1) > RATE_MATCH else ""
+        rep, drop = self.repeated, self.dropped
+        return (f"{self.name}: variable frame rate ({spread}{average}): resampled to a constant "
+                f"{self.fps:g} fps by nearest timestamp — {self.n_source} frames → {len(self.source)} "
+                f"({len(rep)} repeated{_first(rep, 'frames')}; {len(drop)} dropped"
+                f"{_first(drop, 'source frames')}); frame i is at i / {self.fps:g} s")
+
+
+def _first(indices: np.ndarray, what: str) -> str:
+    """``: frames 3, 9, …`` listing the first :data:`FIRST_FEW` of ``indices`` ("" when none)."""
+    if not len(indices):
+        return ""
+    more = ", …" if len(indices) > FIRST_FEW else ""
+    return f": {what} " + ", ".join(str(int(i)) for i in indices[:FIRST_FEW]) + more
+
+
+def standard_rate(rate: float | None, tolerance: float = RATE_MATCH) -> float | None:
+    """The :data:`STANDARD_RATES` entry within ``tolerance`` (relative) of ``rate``, else None."""
+    if not rate or not np.isfinite(rate) or rate <= 0:
+        return None
+    best = min(STANDARD_RATES, key=lambda r: abs(rate / r - 1))
+    return best if abs(rate / best - 1) <= tolerance else None
+
+
+def nominal_rate(candidates: list[float | None], times_s: np.ndarray) -> float | None:
+    """The rate the frames were shot at, whatever frames are missing or doubled.
+
+    The first of ``candidates`` (the stream's ``r_frame_rate``, then its guessed rate) that is a standard rate
+    and that the typical frame interval confirms (within :data:`VFR_TOLERANCE`); else, when the intervals are
+    irregular, the typical interval's rate if it is close to a standard one (:data:`SPACING_MATCH`:
+    millisecond timestamps jitter); else None. The typical interval is the mean of the intervals near the
+    median one, so gaps and bursts do not count.
+    """
+    d = np.diff(np.asarray(times_s, np.float64))
+    d = d[d > 0]
+    period = None
+    if len(d):
+        med = float(np.median(d))
+        period = float(np.mean(d[np.abs(d / med - 1) <= VFR_TOLERANCE]))
+    for rate in candidates:
+        if standard_rate(rate) and (period is None or abs(period * float(rate) - 1) <= VFR_TOLERANCE):
+            return float(rate)
+    if period is None or not np.any(np.abs(d / period - 1) > VFR_TOLERANCE):
+        return None  # regular frames at an unusual rate: the container's rate stands
+    snapped = standard_rate(1 / period, SPACING_MATCH)
+    return float(snapped) if snapped else None
 
 
 def _probe(path: Path) -> VideoProbe | None:
@@ -126,13 +241,18 @@ def _probe(path: Path) -> VideoProbe | None:
             field = cc.field_order
             field = FIELD_ORDERS.get(int(field), "unknown") if not isinstance(field, str) else field
             name = container.format.name
+            times = (np.sort(np.asarray(pts, np.float64)) - min(pts)) * tb if pts and tb else np.zeros(0)
+            nominal = nominal_rate([_rate(stream.base_rate), _rate(stream.guessed_rate)], times)
             return VideoProbe(path, cc.name or "", name or "", int(cc.width), int(cc.height),
-                              float(rate) if rate else None,
-                              (np.sort(np.asarray(pts, np.float64)) - min(pts)) * tb if pts and tb
-                              else np.zeros(0), field)
+                              float(rate) if rate else None, times, field, nominal)
     except (av.FFmpegError, OSError, ValueError) as e:
         log.debug("PyAV cannot probe %s: %s", path, e)
         return None
+
+
+def _rate(value) -> float | None:
+    """A PyAV rate (a Fraction or None) as a float; None when absent or zero."""
+    return float(value) if value else None
 
 
 @functools.lru_cache(maxsize=32)

@@ -1,7 +1,9 @@
 """Turn what the user gives ``rally3d infer`` (a video file or a clip folder) into the clip folder it writes.
 
 * a **video**: a new clip folder (``--out``, default ``runs/infer/<video stem>``) whose ``clip.yaml`` points at
-  the video (relative path; the video is not copied) with the size, frame rate and frame count read from it;
+  the video (relative path; the video is not copied) with the size, frame rate and frame count read from it
+  (a variable-frame-rate video: its nominal rate, and ``timing:`` says which frames the reader repeats and
+  drops to present it at that rate);
 * a **clip folder** without ``--out``: the clip itself (results are written beside its files);
 * a **clip folder** with ``--out``: a new clip folder pointing at the same video, with the calibration inputs
   (``court_points.csv``, ``camera.yaml``) copied, but *not* the annotations — so the original can serve as the
@@ -57,6 +59,19 @@ def probe_video(path: Path) -> tuple[int, int, float, int]:
         if not src.fps or src.fps <= 0:
             raise FormatError(path, "the video does not state its frame rate", fix=VIDEO_FIX)
         return src.width, src.height, float(src.fps), len(src)
+
+
+def video_timing(path: Path, fps: float, first: int = 0, stop: int | None = None) -> dict | None:
+    """clip.yaml's ``timing`` for a variable-frame-rate video presented at ``fps`` (its frames
+    ``first .. stop-1``): the rates and the frames repeated and dropped
+    (:meth:`~inference.clipio.probe.Resampling.record`); None when the timing is regular or the container
+    cannot be probed."""
+    from inference.clipio.probe import probe_video_file
+
+    probe = probe_video_file(path)
+    if probe is None or not probe.vfr:
+        return None
+    return probe.resampling(fps).record(first, stop)
 
 
 def video_notes(path: Path) -> list[str]:
@@ -126,13 +141,11 @@ def prepare(source: Path, out: Path | None, court: str | None, camera: Path | No
                         height=height, video="video.mp4", n_frames=n, source=str(source))
         if court.endswith(".yaml"):
             info.court = os.path.relpath(Path(court).resolve(), out.resolve())
-        clip, reference = _new_clip(out, info, source), None
+        timing = video_timing(source, fps)
+        clip, reference = _new_clip(out, info, source, {"timing": timing} if timing else None), None
     else:
         raise FileNotFoundError(f"{source}: neither a video file nor a clip folder (with clip.yaml)")
-    if camera is not None:
-        _install_camera(clip, Path(camera))
-    if court_points is not None:
-        _install_court_points(clip, Path(court_points))
+    _install_calibration(clip, camera, court_points)
     return Prepared(clip, source, reference)
 
 
@@ -167,9 +180,11 @@ def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path
 
         with FrameSource.open(video, cache_size=0) as src:
             written = write_video(out / "video.mp4", src.iter(first, stop), fps, fourcc="h264", crf=18)
+        timing = video_timing(video, fps, first, stop)
         info = ClipInfo(sport=Path(court).stem if court.endswith(".yaml") else court, fps=fps, width=width,
                         height=height, video="video.mp4", n_frames=written,
-                        source=f"{video} from {first / fps:.2f} s (frame {first})", extra={"cut": record})
+                        source=f"{video} from {first / fps:.2f} s (frame {first})",
+                        extra={"cut": record, **({"timing": timing} if timing else {})})
         if court.endswith(".yaml"):
             info.court = os.path.relpath(Path(court).resolve(), out.resolve())
         clip = Clip.create(out, info, exist_ok=True)
@@ -177,10 +192,7 @@ def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path
         camera = source / "camera.yaml"  # the camera does not change along a video; clicked points neither
     if is_clip_folder(source) and court_points is None and (source / "court_points.csv").is_file():
         court_points = source / "court_points.csv"
-    if camera is not None:
-        _install_camera(clip, Path(camera))
-    if court_points is not None:
-        _install_court_points(clip, Path(court_points))
+    _install_calibration(clip, camera, court_points)
     return Prepared(clip, source, None)
 
 
@@ -206,12 +218,13 @@ def request_auto_mask(clip: Clip, log=print) -> Clip:
     return Clip(clip.root)
 
 
-def _new_clip(out: Path, info: ClipInfo, video: Path) -> Clip:
-    """A clip folder at ``out`` whose clip.yaml points (relatively) at ``video``."""
+def _new_clip(out: Path, info: ClipInfo, video: Path, extra: dict | None = None) -> Clip:
+    """A clip folder at ``out`` whose clip.yaml points (relatively) at ``video``; ``extra``: keys to add (not
+    ``info``'s own extra keys, which belong to the source clip)."""
     out.mkdir(parents=True, exist_ok=True)
     rel = os.path.relpath(Path(video).resolve(), out.resolve())
     new = ClipInfo(**{**{k: v for k, v in info.to_dict().items() if k in ClipInfo.__dataclass_fields__},
-                      "video": rel, "extra": {}})
+                      "video": rel, "extra": dict(extra or {})})
     if (out / "clip.yaml").is_file():
         old = Clip(out).info
         if old.video != new.video or (old.width, old.height) != (new.width, new.height):
@@ -219,29 +232,51 @@ def _new_clip(out: Path, info: ClipInfo, video: Path) -> Clip:
     return Clip.create(out, new, exist_ok=True)
 
 
+def _install_calibration(clip: Clip, camera: Path | None, court_points: Path | None, log=print) -> None:
+    """Copy ``--camera`` / ``--court-points`` into the clip (previous versions backed up). New court points
+    without ``--camera`` retire a camera.yaml made by hand from other points (backed up, then recalibrated by
+    the camera stage from the new points), so that points and camera never disagree."""
+    if camera is not None:
+        _install_camera(clip, Path(camera), log)
+    if court_points is None or not _install_court_points(clip, Path(court_points), log):
+        return
+    if camera is None and clip.camera_path.is_file():
+        from .state import RunState, backup_file
+
+        if RunState(clip.root).written_by_pipeline(clip.camera_path):
+            return  # the camera stage recalibrates it from the new points anyway
+        copy = backup_file(clip.root, clip.camera_path)
+        clip.camera_path.unlink()
+        log(f"rally3d infer: {clip.camera_path} was not calibrated from the new court points; it is kept in "
+            f"{copy} and the camera is calibrated from {court_points}")
+
+
 def _install_camera(clip: Clip, path: Path, log=print) -> None:
+    from inference.calibration import require_court_view
+    from inference.court import load_court
+
     cam = Camera.load(path)  # clear FormatError on a malformed file
     clip.check_camera(cam, path)
+    require_court_view(cam, load_court(clip.court_path()), path)  # before a long run that cannot place anything
     if path.resolve() != clip.camera_path.resolve():
-        _backup_replaced(clip, clip.camera_path, path, log)
-        clip.write_camera(cam)
+        _replace_from(clip.camera_path, path, log)
 
 
-def _install_court_points(clip: Clip, path: Path, log=print) -> None:
+def _install_court_points(clip: Clip, path: Path, log=print) -> bool:
+    """Copy ``path`` to the clip's court_points.csv; whether its content changed."""
     if path.resolve() == clip.court_points_path.resolve():
-        return
+        return False
     from inference.clipio import read_court_points_csv
 
-    points = read_court_points_csv(path)
-    _backup_replaced(clip, clip.court_points_path, path, log)
-    clip.write_court_points(points)
+    read_court_points_csv(path)  # clear FormatError on a malformed file
+    return _replace_from(clip.court_points_path, path, log)
 
 
-def _backup_replaced(clip: Clip, target: Path, source: Path, log) -> None:
-    """Before ``source`` replaces the clip's ``target`` (a hand-made file), keep a copy and say so."""
-    if not target.is_file() or target.read_bytes() == source.read_bytes():
-        return
-    from .state import backup_file
+def _replace_from(target: Path, source: Path, log) -> bool:
+    """Copy ``source`` over ``target`` keeping a backup of a different ``target`` (the one rule of
+    :func:`inference.clipio.atomic.replace_keeping_backup`); whether ``target`` changed."""
+    from inference.clipio.atomic import replace_keeping_backup
 
-    copy = backup_file(clip.root, target)
-    log(f"rally3d infer: {target} is replaced by {source}; the previous {target.name} is kept in {copy}")
+    data = source.read_bytes()
+    return replace_keeping_backup(target, lambda tmp: tmp.write_bytes(data), log=log,
+                                  command="rally3d infer").changed

@@ -4,10 +4,11 @@ Each stage declares the files it reads (its *inputs*, fingerprinted for resuming
 files it writes. A stage that cannot run says why: :class:`Skip` (an optional input is absent — e.g. no
 calibration, no pose backend) or :class:`StageError` (bad input: the message names the file and the fix).
 
-Order: camera → detect → smooth → players → events → reconstruct. The camera comes first because it is
-cheap and a calibration that does not fit the video must stop the run before the expensive detection; the
+Order: camera → shots → detect → smooth → players → events → reconstruct. The camera comes first because it
+is cheap and a calibration that does not fit the video must stop the run before the expensive detection; the
 players come before the events so that the player-aware event model can read them (without players, or
-with ``--pose none``, it runs on the ball alone).
+with ``--pose none``, it runs on the ball alone). Every stage after ``shots`` leaves the frames outside its
+court-view shots (``shots.json``: close-ups, replays) out: no ball, player row, event or 3D point there.
 """
 from __future__ import annotations
 
@@ -125,17 +126,19 @@ def _camera_inputs(ctx: Context) -> dict[str, Path | None]:
 
 
 def _camera_run(ctx: Context) -> Outcome:
-    from inference.calibration import calibrate_court
+    from inference.calibration import calibrate_court, require_court_view
 
     clip = ctx.clip
     if ctx.given_camera():
         clip.check_camera(clip.read_camera())
+        require_court_view(clip.read_camera(), ctx.court, clip.camera_path)
         return Outcome(note="camera.yaml given" + _drift_note(ctx))
     if clip.court_points_path.is_file():
         points = clip.read_court_points(known_names=ctx.court.point_names)
         size = np.array([clip.info.width, clip.info.height], dtype=float)
         result = calibrate_court(ctx.court, {n: xy * size for n, xy in zip(points.names, points.xy)},
                                  (clip.info.width, clip.info.height))
+        require_court_view(result.camera, ctx.court, clip.court_points_path)
         clip.write_camera(result.camera)
         warn = "".join(f"; warning: {w}" for w in result.warnings)
         return Outcome(note=f"calibrated from {len(result.names)} court points ({result.method}), "
@@ -214,6 +217,16 @@ def _court_frames(ctx: Context) -> np.ndarray | None:
     return report.active()
 
 
+def _cut_frames(ctx: Context) -> list[int]:
+    """The first frame of every shot after the first (shots.json; [] without it): no flight is smoothed
+    across a cut."""
+    from inference.shots import ShotReport
+
+    if _court_frames(ctx) is None:
+        return []
+    return [s.start for s in ShotReport.read(_shots_path(ctx)).shots[1:]]
+
+
 def _court_spans(ctx: Context) -> list[tuple[int, int]] | None:
     """The court-view shots ``[(start, stop), ...]`` that the events and 3D stages handle one by one (None: no
     shots.json or a single view of the whole clip — the clip is handled whole, as without shots)."""
@@ -281,8 +294,14 @@ def _smooth_run(ctx: Context) -> Outcome:
     coasted = raw.visibility == 3
     xy = raw.xy.copy()
     xy[coasted] = np.nan
-    measured = BallTrack(raw.frame, np.where(coasted, 0, raw.visibility), xy)
-    res = smooth_track(measured, info.width, info.height, info.fps)
+    vis = np.where(coasted, 0, raw.visibility)
+    active = _court_frames(ctx)
+    if active is not None:  # a detection outside the court views (a track made elsewhere) is no ball of ours
+        off = (raw.frame >= 0) & (raw.frame < len(active))
+        off[off] = ~active[raw.frame[off]]
+        vis[off], xy[off] = 0, np.nan
+    measured = BallTrack(raw.frame, vis, xy)
+    res = smooth_track(measured, info.width, info.height, info.fps, event_frames=_cut_frames(ctx))
     ctx.clip.write_ball(res.track)
     return Outcome(len(raw), f"{len(res.pieces)} pieces, {int(coasted.sum())} coasted frames and "
                    f"{len(res.outliers)} outliers dropped")
@@ -392,10 +411,15 @@ def _players_run(ctx: Context) -> Outcome:
         if name == "auto":
             raise Skip(f"no pose backend available ({reason})")
         raise StageError(f"pose backend {name!r}: {reason}")
-    poses = backend.run(clip, progress=ctx.cfg.progress)
-    players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig())
+    active = _court_frames(ctx)  # close-ups and replays: no pose search, no player rows
+    poses = backend.run(clip, progress=ctx.cfg.progress, active=active)
+    players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig(),
+                                 active=active)
     clip.write_players(players)
-    return Outcome(len(poses), f"{len(players.ids())} players")
+    note = f"{len(players.ids())} players"
+    if active is not None and not active.all():
+        note += f" ({int((~active).sum())} frames outside court views not searched, shots.json)"
+    return Outcome(len(poses) if active is None else int(active.sum()), note)
 
 
 def _players_outputs(ctx: Context) -> list[Path]:
@@ -466,9 +490,11 @@ def build_stages() -> list[Stage]:
                                      "clip_yaml": ctx.clip.clip_yaml_path, "mask": ctx.clip.root / "mask_auto.yaml"},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
               lambda ctx: [ctx.detected_path], _detect_run),
-        Stage("smooth", lambda ctx: {"detected": ctx.detected_path}, lambda ctx: {"smoother": "rts-v2-detections-only"},
+        Stage("smooth", lambda ctx: {"detected": ctx.detected_path, "shots": _shots_path(ctx)},
+              lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
-        Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model},
+        Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model,
+                                      "shots": _shots_path(ctx)},
               lambda ctx: {"pose": ctx.cfg.pose}, _players_outputs, _players_run),
         Stage("events", _events_inputs, lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,

@@ -24,7 +24,7 @@ from inference.clipio import PlayerTracks
 from inference.court import Court
 
 from .positions import ANKLE_HEIGHT, court_positions
-from .types import J, PoseSequence
+from .types import J, Persons, PoseSequence
 
 TRACKERS = ("ocsort", "bytetrack", "sort")
 
@@ -257,13 +257,51 @@ def to_player_tracks(players: list[Track], court: Court, image_size: tuple[int, 
 
 
 def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: float,
-                       config: TrackingConfig | None = None) -> PlayerTracks:
-    """The whole pipeline: track → stitch → select per side → interpolate gaps → players.csv table."""
+                       config: TrackingConfig | None = None,
+                       active: np.ndarray | None = None) -> PlayerTracks:
+    """The whole pipeline: track → stitch → select per side → interpolate gaps → players.csv table.
+
+    ``active`` (N,) bool: the frames to use (court-view shots, :mod:`inference.shots`); the poses of the other
+    frames are ignored and no row is written there — no gap is filled and no position smoothed across them.
+    """
     cfg = config or TrackingConfig()
+    if active is not None:
+        active = np.asarray(active, bool)
+        seq = only_frames(seq, active)
     tracks = track_people(seq, camera, fps, cfg)
     tracks = stitch(tracks, fps, cfg)
-    players = [smooth_court(interpolate(t, fps, cfg), fps, cfg) for t in select_players(tracks, court, fps, cfg)]
+    players = [interpolate(t, fps, cfg) for t in select_players(tracks, court, fps, cfg)]
+    if active is None:
+        players = [smooth_court(t, fps, cfg) for t in players]
+    else:
+        players = [_smooth_within(t, active, fps, cfg) for t in players]
     return to_player_tracks(players, court, camera.image_size)
+
+
+def only_frames(seq: PoseSequence, active: np.ndarray) -> PoseSequence:
+    """``seq`` with nobody in the frames where ``active`` is False (or beyond its end)."""
+    kept = [p if i < len(active) and active[i] else Persons.empty() for i, p in enumerate(seq.frames)]
+    return PoseSequence(kept, seq.source)
+
+
+def take_frames(t: Track, keep: np.ndarray) -> Track:
+    """The rows of ``t`` where ``keep`` (T,) bool is True."""
+    fields = ("frames", "boxes", "keypoints", "kp_scores", "scores", "court")
+    return Track(*(getattr(t, f)[keep] for f in fields))
+
+
+def _smooth_within(t: Track, active: np.ndarray, fps: float, cfg: TrackingConfig) -> Track:
+    """``t`` cut to the ``active`` frames, its court positions smoothed within each run of them."""
+    from inference.shots import segments
+
+    pieces = [take_frames(t, (t.frames >= a) & (t.frames < b)) for a, b in segments(active)]
+    pieces = [smooth_court(p, fps, cfg) for p in pieces if len(p)]
+    if not pieces:
+        return take_frames(t, np.zeros(len(t), bool))
+    out = pieces[0]
+    for p in pieces[1:]:
+        out = out.concat(p)
+    return out
 
 
 def with_tracker(cfg: TrackingConfig, name: str) -> TrackingConfig:
