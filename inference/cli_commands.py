@@ -2,9 +2,15 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable, Collection, Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from inference.clipio.errors import FormatError
 
 
 def _clip_court(clip):
@@ -64,7 +70,7 @@ def run_auto_calibrate(args: argparse.Namespace, clip, court) -> int:
               f"instead (rally3d label {clip.root}) and run rally3d calibrate.", file=sys.stderr)
         return 1
     if not args.dry_run:
-        print(f"wrote {clip.write_camera(fit.camera)}")
+        print(f"wrote {_write_camera(clip, fit.camera)}")
         pts = fit.court_points(court)
         size = np.array([clip.info.width, clip.info.height], dtype=float)
         table = CourtPoints(list(pts), np.array(list(pts.values())).reshape(-1, 2) / size)
@@ -92,7 +98,7 @@ def _compare_gt(clip, cam) -> None:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    from inference.calibration import calibrate_court
+    from inference.calibration import calibrate_court, court_view_problems
     from inference.clipio import Clip
 
     clip = Clip(args.clip)
@@ -118,10 +124,24 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if result.suspect:
         print(f"warning: these points fit badly, check the clicks: {', '.join(result.suspect)}")
     _compare_gt(clip, cam)
+    problems = court_view_problems(cam, court)
+    if problems:
+        import sys
+
+        print(f"rally3d calibrate: error: {clip.court_points_path}: this calibration cannot be right — "
+              f"{'; '.join(problems)}. Nothing written. Check the clicked points (rally3d label {clip.root}): "
+              "spread over the court, on the right named points, not all on one line.", file=sys.stderr)
+        return 1
     if not args.dry_run:
-        path = clip.write_camera(cam)
-        print(f"wrote {path}")
+        print(f"wrote {_write_camera(clip, cam)}")
     return 0
+
+
+def _write_camera(clip, cam) -> Path:
+    """Write the clip's camera.yaml; a different one already there is backed up first (and said so)."""
+    from inference.clipio.atomic import replace_keeping_backup
+
+    return replace_keeping_backup(clip.camera_path, cam.save, command="rally3d calibrate").path
 
 
 # --- rally3d courts --------------------------------------------------------------------------------------
@@ -153,13 +173,15 @@ def run_courts(args: argparse.Namespace) -> int:
 
 # --- rally3d check ---------------------------------------------------------------------------------------
 def check(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("check", help="validate every file of a clip folder",
-                       description="Reads each file of the clip folder that exists and reports problems "
+    p = sub.add_parser("check", help="validate every file of clip folders or datasets",
+                       description="Reads each file of each clip folder that exists and reports problems "
                        "with file, line and fix: opens the video and decodes its first and last frames "
                        "(every frame with --full), checks that the video and camera.yaml have clip.yaml's "
-                       "frame size, and that events.csv uses the court's event labels. Exit code 1 if any "
-                       "file is invalid.")
-    p.add_argument("clips", type=Path, nargs="+", help="clip folders")
+                       "frame size, and that events.csv uses the court's event labels. A dataset (a folder "
+                       "with manifest.yaml, a manifest.yaml, or a folder of clip folders) is checked clip by "
+                       "clip, every clip, and ends with a summary. Exit code 1 if any file is invalid.")
+    p.add_argument("clips", type=Path, nargs="+",
+                   help="clip folders, dataset folders (manifest.yaml or clip folders) or manifest.yaml files")
     p.add_argument("--full", action="store_true", help="decode every frame of the video (slow on long videos)")
     p.set_defaults(func=run_check)
 
@@ -195,59 +217,142 @@ def check_video(clip, full: bool = False) -> str:
     return f"{n} frames, {decoded} decoded"
 
 
-def run_check(args: argparse.Namespace) -> int:
+@dataclass
+class ClipCheck:
+    """What :func:`check_clip` found in one clip folder: the lines ``rally3d check`` prints, and the problems."""
+
+    root: Path
+    lines: list[str] = field(default_factory=list)
+    problems: list[FormatError] = field(default_factory=list)  # each names its file, line and fix
+
+    def fail(self, err: FormatError) -> None:
+        self.problems.append(err)
+        self.lines.append(f"  FAIL {err}")
+
+
+@dataclass
+class CheckReport:
+    """Every clip :func:`check_paths` checked, and the problems of the datasets themselves (a manifest that
+    cannot be read, an entry without its clip folder)."""
+
+    clips: list[ClipCheck] = field(default_factory=list)
+    dataset_problems: list[FormatError] = field(default_factory=list)
+
+    @property
+    def problems(self) -> list[FormatError]:
+        return self.dataset_problems + [p for c in self.clips for p in c.problems]
+
+    def summary(self) -> str:
+        """``3 of 24 clips have problems: a, b, c`` (plus the datasets' own problems), or ``24 clips, all fine``."""
+        bad = [c.root.name or str(c.root) for c in self.clips if c.problems]
+        n = len(self.clips)
+        text = f"{n} clip{'s' * (n != 1)}, all fine"
+        if bad:
+            more = f" … (+{len(bad) - 20})" if len(bad) > 20 else ""
+            text = f"{len(bad)} of {n} clips have problems: {', '.join(bad[:20])}{more}"
+        if self.dataset_problems:
+            text += f"; {len(self.dataset_problems)} problem(s) in the dataset itself (its manifest)"
+        return text
+
+
+def check_clip(root: Path, *, full: bool = False, files: Collection[str] | None = None,
+               labels: Sequence[str] | None = None) -> ClipCheck:
+    """Read the files of clip folder ``root``: clip.yaml, then the video and every table that exists
+    (``files``: only those names that exist, ``"video"`` for the video; ``()``: clip.yaml alone).
+
+    ``labels``: the event labels events.csv may hold (default: the clip's court's, loaded when ``files``
+    is None, else any). Never raises for a bad file: each problem is a :class:`FormatError` in the result.
+    """
     from inference.clipio import Clip
     from inference.clipio.atomic import stale_temp_files
     from inference.clipio.errors import FormatError
 
-    bad = 0
-    for root in args.clips:
-        clip = Clip(root)
+    clip, check = Clip(root), ClipCheck(Path(root))
+    try:
+        info = clip.info
+        court = _clip_court(clip) if files is None else None
+    except (FormatError, FileNotFoundError) as e:  # FileNotFoundError: clip.yaml names no known court
+        err = e if isinstance(e, FormatError) else FormatError(clip.clip_yaml_path, str(e),
+                                                               fix="set sport (or court) to a known court")
+        check.problems.append(err)
+        check.lines.append(f"FAIL {root}: {err}")
+        return check
+    check.lines.append(f"{root}: {info.sport}, {info.width}x{info.height} @ {info.fps:g} fps")
+    n_frames = info.n_frames
+    if files is None or "video" in files:
         try:
-            info = clip.info
-            court = _clip_court(clip)
-        except (FormatError, FileNotFoundError) as e:
-            print(f"FAIL {root}: {e}")
-            bad += 1
-            continue
-        print(f"{root}: {info.sport}, {info.width}x{info.height} @ {info.fps:g} fps")
-        try:
-            print(f"  ok   {info.video} {check_video(clip, args.full)}")
+            check.lines.append(f"  ok   {info.video} {check_video(clip, full)}")
             n_frames = clip.n_frames
         except FormatError as e:
-            print(f"  FAIL {e}")
-            bad += 1
-            n_frames = info.n_frames
+            check.fail(e)
+    for name, read in _table_readers(clip, n_frames, court, labels).items():
+        if (files is not None and name not in files) or not (clip.root / name).is_file():
+            continue
+        try:
+            obj = read()
+            check.lines.append(f"  ok   {name} {len(obj) if hasattr(obj, '__len__') else ''}")
+        except FormatError as e:
+            check.fail(e)
+        except ValueError as e:  # a reader's own check that does not name the file yet
+            check.fail(FormatError(clip.root / name, str(e), fix="correct the file (docs/formats.md)"))
+    for tmp in stale_temp_files(clip.root):
+        check.lines.append(f"  note {tmp.name}: left by a save that did not finish (the labeler removes it at start)")
+    return check
 
-        def camera(gt: bool = False):
-            cam = clip.read_camera(gt=gt)
-            clip.check_camera(cam, clip.root / ("gt" if gt else "") / "camera.yaml")
-            return cam
 
-        labels = court.annotation_labels
-        checks = {
-            "ball.csv": lambda: clip.read_ball(n_frames=n_frames),
-            "inactive_balls.csv": lambda: clip.read_inactive_balls(n_frames=n_frames),
-            "events.csv": lambda: clip.read_events(n_frames=n_frames, labels=labels),
-            "court_points.csv": lambda: clip.read_court_points(known_names=court.point_names),
-            "camera.yaml": camera,
-            "ball_3d.csv": lambda: clip.read_ball_3d(n_frames=n_frames),
-            "players.csv": lambda: clip.read_players(n_frames=n_frames),
-            "gt/camera.yaml": lambda: camera(gt=True),
-            "gt/ball_3d.csv": lambda: clip.read_ball_3d(gt=True, n_frames=n_frames),
-            "gt/events.csv": lambda: clip.read_events(gt=True, n_frames=n_frames, labels=labels),
-            "gt/players.csv": lambda: clip.read_players(gt=True, n_frames=n_frames),
-        }
-        for name, read in checks.items():
-            if not (clip.root / name).is_file():
-                continue
-            try:
-                obj = read()
-                n = len(obj) if hasattr(obj, "__len__") else ""
-                print(f"  ok   {name} {n}")
-            except FormatError as e:
-                print(f"  FAIL {e}")
-                bad += 1
-        for tmp in stale_temp_files(clip.root):
-            print(f"  note {tmp.name}: left by a save that did not finish (the labeler removes it at start)")
-    return 1 if bad else 0
+def _table_readers(clip, n_frames: int | None, court, labels: Sequence[str] | None) -> dict[str, Callable]:
+    """The readers of a clip's tables and calibrations by file name (``court``: its labels and point names)."""
+    labels = labels if labels is not None or court is None else court.annotation_labels
+    points = court.point_names if court is not None else None
+
+    def camera(gt: bool = False):
+        cam = clip.read_camera(gt=gt)
+        clip.check_camera(cam, clip.root / ("gt" if gt else "") / "camera.yaml")
+        return cam
+
+    return {
+        "ball.csv": lambda: clip.read_ball(n_frames=n_frames),
+        "inactive_balls.csv": lambda: clip.read_inactive_balls(n_frames=n_frames),
+        "events.csv": lambda: clip.read_events(n_frames=n_frames, labels=labels),
+        "court_points.csv": lambda: clip.read_court_points(known_names=points),
+        "camera.yaml": camera,
+        "ball_3d.csv": lambda: clip.read_ball_3d(n_frames=n_frames),
+        "players.csv": lambda: clip.read_players(n_frames=n_frames),
+        "gt/camera.yaml": lambda: camera(gt=True),
+        "gt/ball_3d.csv": lambda: clip.read_ball_3d(gt=True, n_frames=n_frames),
+        "gt/events.csv": lambda: clip.read_events(gt=True, n_frames=n_frames, labels=labels),
+        "gt/players.csv": lambda: clip.read_players(gt=True, n_frames=n_frames),
+    }
+
+
+def check_paths(paths: Iterable[Path], *, full: bool = False, files: Callable[[Path], Collection[str]] | None = None,
+                labels: Sequence[str] | None = None,
+                on_clip: Callable[[ClipCheck], None] | None = None) -> CheckReport:
+    """Check every clip of ``paths`` (clip folders, dataset folders or manifest.yaml files) with
+    :func:`check_clip`; ``files(root)``: the names to read of each clip (None: every file that exists);
+    ``on_clip(check)`` is called after each clip. Nothing stops at a bad clip: all problems are reported."""
+    from inference.clipio.errors import FormatError
+    from inference.clipio.manifest import dataset_clips
+
+    report = CheckReport()
+    for path in paths:
+        try:
+            roots = dataset_clips(path, skipped=report.dataset_problems) or [Path(path)]
+        except FormatError as e:  # a manifest.yaml that cannot be read at all
+            report.dataset_problems.append(e)
+            continue
+        for root in roots:
+            result = check_clip(root, full=full, files=None if files is None else files(root), labels=labels)
+            report.clips.append(result)
+            if on_clip is not None:
+                on_clip(result)
+    return report
+
+
+def run_check(args: argparse.Namespace) -> int:
+    report = check_paths(args.clips, full=args.full, on_clip=lambda c: print("\n".join(c.lines)))
+    for e in report.dataset_problems:
+        print(f"FAIL {e}")
+    if len(report.clips) > 1 or report.dataset_problems:
+        print(report.summary())
+    return 1 if report.problems else 0

@@ -23,12 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from inference.clipio import Clip, Manifest, ManifestEntry
-from inference.clipio.manifest import SPLITS
+from inference.clipio.manifest import SPLITS, clip_folders, is_manifest_file
 
 log = logging.getLogger(__name__)
 
 FRACTIONS = (0.8, 0.1, 0.1)
-SKIP_DIRS = {".cache", ".rally3d", "gt", "frames", "__pycache__"}
 
 
 @dataclass
@@ -53,17 +52,6 @@ class DataSource:
         counts = self.manifest.counts()
         how = "inferred (no manifest.yaml)" if self.inferred else "manifest.yaml"
         return f"{self.root}: {sum(counts.values())} clips, " + ", ".join(f"{s} {counts[s]}" for s in SPLITS) + f" [{how}]"
-
-
-def clip_folders(root: Path) -> list[str]:
-    """Clip folders (holding ``clip.yaml``) under ``root``, relative, sorted; hidden and data folders skipped."""
-    out = []
-    for p in sorted(root.rglob("clip.yaml")):
-        rel = p.parent.relative_to(root)
-        if any(part in SKIP_DIRS or part.startswith(".") for part in rel.parts):
-            continue
-        out.append(rel.as_posix() if rel.parts else ".")
-    return out
 
 
 def group_of(clip: Clip, name: str) -> str:
@@ -100,10 +88,12 @@ def infer_manifest(root: str | Path, seed: int = 0, fractions: Sequence[float] =
 
 def resolve_source(root: str | Path, seed: int = 0, fractions: Sequence[float] = FRACTIONS,
                    weight: float | None = None) -> DataSource:
-    """A :class:`DataSource` for a dataset folder (manifest.yaml) or a folder of clip folders."""
+    """A :class:`DataSource` for a dataset folder (manifest.yaml), a manifest.yaml itself (e.g. one a run saved,
+    :func:`save_inferred`) or a folder of clip folders."""
     root = Path(root)
-    if (root / "manifest.yaml").is_file():
-        return DataSource(root, Manifest.load(root), False, weight)
+    if (root / "manifest.yaml").is_file() or is_manifest_file(root):
+        manifest = Manifest.load(root)
+        return DataSource(manifest.root, manifest, False, weight)
     if (root / "clip.yaml").is_file():  # a single clip folder: a dataset of one clip
         return DataSource(root.parent, Manifest(root.parent, [ManifestEntry(root.name, "train")], name=root.name,
                                                 source="a single clip folder"), True, weight)

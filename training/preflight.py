@@ -8,6 +8,10 @@ on a fresh clone either makes its small default dataset or stops at once with on
   generated now, with a progress bar, after a line saying what and about how long;
 - otherwise: :class:`SystemExit` with one line: the folder and the exact ``rally3d synth`` command (or
   how to point ``data.root`` elsewhere).
+
+Then every clip of every root is read the way the run will read it (:func:`check_clips`, the same checks as
+``rally3d check``): a run never stops at its first broken clip; it stops before training with every problem
+(file, line, fix) and a summary, or goes on.
 """
 from __future__ import annotations
 
@@ -40,9 +44,11 @@ def _shown(path: str | Path) -> str:
 
 
 def dataset_exists(root: str | Path) -> bool:
-    """A dataset folder (manifest.yaml), a clip folder, or a folder with clip folders below it."""
+    """A dataset folder (manifest.yaml) or a manifest.yaml, a clip folder, or a folder with clip folders below it."""
+    from inference.clipio.manifest import is_manifest_file
+
     root = Path(root)
-    if (root / "manifest.yaml").is_file() or (root / "clip.yaml").is_file():
+    if (root / "manifest.yaml").is_file() or (root / "clip.yaml").is_file() or is_manifest_file(root):
         return True
     return root.is_dir() and next(root.glob("*/clip.yaml"), None) is not None or (
         root.is_dir() and next(root.glob("*/*/clip.yaml"), None) is not None)
@@ -63,7 +69,8 @@ def data_roots(cfg) -> list[str]:
 
 
 def check_data(cfg, generate=None) -> list[str]:
-    """Make sure every ``data.root`` exists (see the module docstring); returns the roots generated."""
+    """Make sure every ``data.root`` exists and every clip of it can be read (see the module docstring);
+    returns the roots generated."""
     made = []
     for root in data_roots(cfg):
         if dataset_exists(root):
@@ -82,7 +89,82 @@ def check_data(cfg, generate=None) -> list[str]:
         raise SystemExit(f"no dataset at {_shown(root)} (no manifest.yaml, no clip folders): pass data.root=DIR, a "
                          f"folder of clip folders as rally3d label writes them, or make synthetic clips with "
                          f"`{synth_command('data/synth_padel', DEFAULT_DATASETS['synth_padel'])}`")
+    key = _checked_key(cfg)
+    if key not in _CHECKED:  # train.py checks before importing torch, run.train again for API callers: once
+        check_clips(cfg)
+        _CHECKED.add(key)
     return made
+
+
+#: the data settings whose clips :func:`check_clips` already passed in this process
+_CHECKED: set[str] = set()
+
+
+def _checked_key(cfg) -> str:
+    """The data settings that decide what :func:`check_clips` reads, as one string."""
+    from omegaconf import OmegaConf
+
+    data = cfg.get("data")
+    return repr((cfg.get("task"), OmegaConf.to_container(data, resolve=True) if data is not None else None))
+
+
+def detector_files(root: Path) -> tuple[str, ...]:
+    """What a detector run reads of a clip folder: the video and ball.csv; clip.yaml alone for a clip without
+    ball.csv (not labelled yet: the run skips it with a warning)."""
+    return ("video", "ball.csv") if (root / "ball.csv").is_file() else ()
+
+
+def event_files(root: Path) -> tuple[str, ...]:
+    """What a hit-event run reads of a clip folder: ball.csv and gt/events.csv (else events.csv), and the
+    video only to count the frames when clip.yaml has no ``n_frames``; clip.yaml alone for a clip without
+    them (skipped with a warning)."""
+    from inference.clipio import Clip, FormatError
+
+    events = "gt/events.csv" if (root / "gt" / "events.csv").is_file() else "events.csv"
+    if not ((root / "ball.csv").is_file() and (root / events).is_file()):
+        return ()
+    clip = Clip(root)
+    try:
+        counted = clip.info.n_frames is None and clip.video_path.exists()
+    except FormatError:  # clip.yaml's own problem: check_clip reports it
+        counted = False
+    return ("ball.csv", events, *(("video",) if counted else ()))
+
+
+def event_labels(cfg) -> list[str] | None:
+    """The events.csv labels a hit-event run can learn from: those its class set maps (``on_unmapped:
+    error``, the default, stops at any other); None (any label) for detectors or ``on_unmapped: warn``."""
+    data = cfg.get("data") or {}
+    if cfg.get("task") != "events" or data.get("on_unmapped", "error") != "error":
+        return None
+    from inference.clipio.tables import EVENT_LABELS
+    from inference.events.classes import ClassSet
+
+    classes = ClassSet.load(data.get("class_set", "padel6"))
+    return [label for label in EVENT_LABELS if classes.encode_label(label) is not None]
+
+
+def check_clips(cfg) -> None:
+    """Read every clip of every ``data.root`` the way the run will (:func:`detector_files`,
+    :func:`event_files`; the checks of ``rally3d check``) and stop before anything is trained, with every
+    problem (file, line, fix) and a summary; return quietly when every clip can be read."""
+    roots = [r for r in data_roots(cfg) if dataset_exists(r)]  # a missing one was made or named by check_data
+    if not roots:
+        return
+    from inference.cli_commands import check_paths
+
+    files = event_files if cfg.get("task") == "events" else detector_files
+    report = check_paths([Path(r) for r in roots], files=files, labels=event_labels(cfg))
+    lines = [str(e) for e in report.problems]
+    if report.clips and not any(files(c.root) for c in report.clips):
+        what = "ball.csv and events.csv" if files is event_files else "ball.csv"
+        lines.append(f"none of the {len(report.clips)} clips has {what}: nothing to train on — label them "
+                     "(rally3d label DIR) or point data.root to labelled clips")
+    if lines:
+        shown = " ".join(shlex.quote(_shown(r)) for r in roots)
+        raise SystemExit(f"data.root: {report.summary() if report.problems else 'no clip is labelled'}. Nothing was "
+                         f"trained; fix this, then run again (`.venv/bin/rally3d check {shown}` checks every clip):\n"
+                         + "\n".join(f"  {ln}" for ln in lines))
 
 
 def _minutes(spec: dict) -> str:

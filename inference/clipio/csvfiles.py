@@ -179,7 +179,11 @@ def _parse_events(table: CsvTable, n_frames: int | None, allowed: tuple[str, ...
     frame = _frames(table, n_frames, unique=False)
     event = table.choices("event", allowed)
     order = np.argsort(frame, kind="stable")
-    frame, event, moved = separate_same_frame(frame[order], event[order], n_frames)
+    try:
+        frame, event, moved = separate_same_frame(frame[order], event[order], n_frames)
+    except ValueError as e:  # more events than frames: no row to point at, the file as a whole is wrong
+        raise FormatError(path, str(e), fix="one event a frame at most: remove the extra rows, or correct "
+                          "n_frames in clip.yaml") from None
     if moved:
         warnings.warn(f"{path}: events on one frame moved to the next free frame: {'; '.join(moved[:5])}"
                       + (f" (+{len(moved) - 5} more)" if len(moved) > 5 else ""), stacklevel=3)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .atomic import atomic_write_text
 from .errors import FormatError
-from .tables import UNIT_TOLERANCE
+from .tables import MAX_FRAMES, MAX_FRAMES_TEXT, UNIT_TOLERANCE
 
 T = TypeVar("T")
 
@@ -234,6 +234,12 @@ class CsvTable:
                 frame >= n_frames,
                 lambda i: f"{column} {frame[i]} is beyond the video ({n_frames} frames)",
                 fix=f"frames must be in 0..{n_frames - 1}; check the clip's video or n_frames",
+            )
+        else:  # no length known: still no frame beyond any video (a table's last frame sizes arrays)
+            self.check(
+                frame >= MAX_FRAMES,
+                lambda i: f"{column} {frame[i]} is beyond any video ({MAX_FRAMES_TEXT})",
+                fix="frames are zero-based indices of the clip's video frames",
             )
         if unique:
             self.check(

@@ -12,6 +12,9 @@
 Paths are relative to the manifest's folder. An entry may name its folder with ``name:`` instead of
 ``path:`` (as other dataset tools write it), or be the folder name alone (``- clip_0002``). Splits are by clip (or by match: give all clips of a
 match the same split), never by frame, so no rally leaks between training and evaluation.
+
+A dataset may also be a plain folder of clip folders (no manifest): :func:`dataset_clips` lists the clips of
+either form.
 """
 from __future__ import annotations
 
@@ -26,6 +29,9 @@ from .errors import FormatError
 from .structured import load_yaml
 
 SPLITS = ("train", "val", "test")
+SKIP_DIRS = {".cache", ".rally3d", "gt", "frames", "__pycache__"}
+"""Folders never searched for clip folders (caches, ground truth, frame folders)."""
+MANIFEST_FIX = "see datasets/README.md for the manifest layout"
 
 
 @dataclass(frozen=True)
@@ -72,31 +78,35 @@ class Manifest:
         return atomic_write_text(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
 
     @classmethod
-    def load(cls, path: str | Path) -> Manifest:
-        """Read a manifest.yaml (or the manifest.yaml inside a dataset folder)."""
+    def load(cls, path: str | Path, *, skipped: list[FormatError] | None = None) -> Manifest:
+        """Read a manifest.yaml (or the manifest.yaml inside a dataset folder).
+
+        With ``skipped=[]`` an entry that cannot be used (no path, a bad split, a folder without clip.yaml)
+        is left out and its error appended, one per entry; otherwise the first such entry raises.
+        """
         path = Path(path)
         if path.is_dir():
             path = path / "manifest.yaml"
-        data = load_yaml(path, fix="see datasets/README.md for the manifest layout")
+        data = load_yaml(path, fix=MANIFEST_FIX)
         if not isinstance(data, dict) or not isinstance(data.get("clips"), list):
-            raise FormatError(path, "needs a `clips:` list of {path, split}",
-                              fix="see datasets/README.md for the manifest layout")
-        clips = []
+            raise FormatError(path, "needs a `clips:` list of {path, split}", fix=MANIFEST_FIX)
+        clips, bad = [], []
         for i, c in enumerate(data["clips"]):
-            if isinstance(c, str) and c.strip():
-                c = {"path": c}
-            folder = c.get("path", c.get("name")) if isinstance(c, dict) else None
-            if folder is None or not str(folder).strip():
-                raise FormatError(path, f"clip entry {i} needs a `path` (or `name`): the clip folder",
-                                  fix="write `- {path: clip_0000, split: train}`")
             try:
-                clips.append(ManifestEntry(str(folder), str(c.get("split", "train"))))
-            except ValueError as e:
-                raise FormatError(path, f"clip entry {i} ({folder}): {e}") from None
+                clips.append(_entry(path, i, c))
+            except FormatError as e:
+                bad.append(e)
+        if bad and skipped is None:
+            raise bad[0]
         missing = [c.path for c in clips if not (path.parent / c.path / "clip.yaml").is_file()]
-        if missing:
+        if missing and skipped is None:
             raise FormatError(path, f"clip folders without clip.yaml: {missing[:5]}",
                               fix="fix the paths (relative to the manifest) or remove the entries")
+        if skipped is not None:
+            skipped += bad + [FormatError(path, f"clip folder {m} has no clip.yaml (looked in {path.parent / m})",
+                                          fix="fix the path (relative to the manifest) or remove the entry")
+                              for m in missing]
+        clips = [c for c in clips if c.path not in missing]
         known = {"name", "sport", "source", "clips"}
         return cls(path.parent, clips, str(data.get("name", "")), str(data.get("sport", "")),
                    str(data.get("source", "")), {k: v for k, v in data.items() if k not in known})
@@ -114,6 +124,50 @@ class Manifest:
         folders = sorted(p.parent.relative_to(root).as_posix() for p in root.rglob("clip.yaml"))
         clips = [ManifestEntry(f, split_of(group_key(f) if group_key else f, fractions)) for f in folders]
         return cls(root, clips, name=root.name)
+
+
+def _entry(path: Path, i: int, c) -> ManifestEntry:
+    """Entry ``i`` of manifest ``path``: ``{path, split}``, ``{name, split}`` or a folder name."""
+    if isinstance(c, str) and c.strip():
+        c = {"path": c}
+    folder = c.get("path", c.get("name")) if isinstance(c, dict) else None
+    if folder is None or not str(folder).strip():
+        raise FormatError(path, f"clip entry {i} needs a `path` (or `name`): the clip folder",
+                          fix="write `- {path: clip_0000, split: train}`")
+    try:
+        return ManifestEntry(str(folder), str(c.get("split", "train")))
+    except ValueError as e:
+        raise FormatError(path, f"clip entry {i} ({folder}): {e}", fix=f"use one of {', '.join(SPLITS)}") from None
+
+
+def clip_folders(root: str | Path) -> list[str]:
+    """Clip folders (holding ``clip.yaml``) under ``root``, relative, sorted; hidden and data folders
+    (:data:`SKIP_DIRS`) skipped."""
+    root = Path(root)
+    out = []
+    for p in sorted(root.rglob("clip.yaml")):
+        rel = p.parent.relative_to(root)
+        if any(part in SKIP_DIRS or part.startswith(".") for part in rel.parts):
+            continue
+        out.append(rel.as_posix() if rel.parts else ".")
+    return out
+
+
+def is_manifest_file(path: str | Path) -> bool:
+    """``path`` is a YAML file: a manifest passed as it is (not the folder holding it)."""
+    return Path(path).is_file() and Path(path).suffix in (".yaml", ".yml")
+
+
+def dataset_clips(path: str | Path, *, skipped: list[FormatError] | None = None) -> list[Path]:
+    """The clip folders of ``path``: itself (it holds clip.yaml), the entries of a manifest (``manifest.yaml``
+    or a folder holding one; ``skipped`` as in :meth:`Manifest.load`), or the clip folders below a folder
+    (:func:`clip_folders`). Empty when ``path`` is none of these."""
+    path = Path(path)
+    if (path / "clip.yaml").is_file():
+        return [path]
+    if (path / "manifest.yaml").is_file() or is_manifest_file(path):
+        return Manifest.load(path, skipped=skipped).paths()
+    return [path / f for f in clip_folders(path)] if path.is_dir() else []
 
 
 def split_of(key: str, fractions: tuple[float, float, float] = (0.8, 0.1, 0.1)) -> str:

@@ -32,6 +32,11 @@ BALL3D_KINDS: tuple[str, ...] = ("fitted", "contact", "gt")
 UNIT_TOLERANCE = 1e-6
 """Normalised coordinates this far outside ``[0, 1]`` are clipped; further out is an error."""
 
+MAX_FRAMES = 4 * 60 * 60 * 240
+"""Most frames a file may address when nothing states the clip's length: four hours of video at 240 fps
+(3,456,000); a frame number beyond it is an error, never an allocation."""
+MAX_FRAMES_TEXT = "four hours at 240 fps"
+
 
 # --------------------------------------------------------------------------------------- validators
 def as_vector(values, name: str, dtype, n: int | None = None) -> np.ndarray:

@@ -22,6 +22,27 @@ def _wrap(text: str) -> str:
     return textwrap.fill(text, width=100)
 
 
+def _say(text: str) -> None:
+    """Print a line that may quote the file (a lone surrogate from a JSON escape is spelt out)."""
+    print(text.encode("utf-8", "backslashreplace").decode("utf-8"))
+
+
+def _clip_facts(clip: Path) -> tuple[tuple[int, int] | None, int | None]:
+    """An existing clip folder's image size and length (None where there is none to read)."""
+    from inference.clipio import Clip, FormatError
+
+    from .common import known_frames
+
+    folder = Clip(clip)
+    if not folder.clip_yaml_path.is_file():
+        return None, None
+    try:
+        info = folder.info
+    except (FormatError, ValueError, OSError):
+        return None, None
+    return (info.width, info.height), known_frames(folder)
+
+
 def _format(explicit: str | None, path: Path) -> str:
     if explicit:
         return explicit
@@ -81,8 +102,12 @@ def register_import(sub: argparse._SubParsersAction) -> None:
     new.add_argument("--sport", help="court of the clip: padel or tennis")
     new.add_argument("--fps", type=float, help="frame rate (Label Studio files give one; CVAT files do not)")
     new.add_argument("--video", help="the frames, relative to the clip folder (default video.mp4)")
-    new.add_argument("--width", type=int, help="image width in pixels (CVAT files give it)")
-    new.add_argument("--height", type=int, help="image height in pixels (CVAT files give it)")
+    new.add_argument(
+        "--width", type=int, help="image width in pixels (CVAT files of tasks made from a video give it)"
+    )
+    new.add_argument(
+        "--height", type=int, help="image height in pixels (CVAT files of tasks made from a video give it)"
+    )
     p.set_defaults(func=run_import)
 
 
@@ -91,20 +116,25 @@ def run_import(args: argparse.Namespace) -> int:
 
     fmt = _format(args.format, args.file)
     labels = LabelMap.parse(args.label_map)
+    clip_size, clip_frames = _clip_facts(args.clip)  # an existing clip bounds the frames from the start
     if fmt == "cvat":
         from .cvat import import_cvat
 
-        imported = import_cvat(args.file, labels)
+        # for a file without <original_size>: --width/--height, else the clip's own image size
+        size = (args.width, args.height) if args.width and args.height else clip_size
+        imported = import_cvat(args.file, labels, size=size, clip_frames=clip_frames)
     else:
         from .labelstudio import import_labelstudio
 
-        imported = import_labelstudio(args.file, labels, task=args.task, annotation=args.annotation)
+        imported = import_labelstudio(
+            args.file, labels, task=args.task, annotation=args.annotation, clip_frames=clip_frames
+        )
     if args.width and args.height:
         imported.width, imported.height = args.width, args.height
     for line in imported.warnings:
-        print(f"warning: {line}")
+        _say(f"warning: {line}")
     visible = int((imported.ball.visibility > 0).sum())
-    print(
+    _say(
         f"{imported.source}: {len(imported.ball)} ball rows ({visible} visible), "
         f"{len(imported.events)} events"
         + (f", {imported.n_frames} frames" if imported.n_frames else "")

@@ -6,8 +6,6 @@ frames are zero-based, coordinates normalised to ``[0, 1]`` (docs/formats.md §2
 
 from __future__ import annotations
 
-import shutil
-import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from itertools import pairwise
@@ -16,12 +14,17 @@ from pathlib import Path
 import numpy as np
 
 from inference.clipio import EVENT_LABELS, BallTrack, Clip, ClipInfo, FormatError, HitEvents
+from inference.clipio.atomic import replace_keeping_backup
+from inference.clipio.tables import MAX_FRAMES, MAX_FRAMES_TEXT  # noqa: F401 - the importers' bound too
+from inference.clipio.csvfiles import write_ball_csv, write_events_csv
 from inference.clipio.csvtable import closest, read_text
 
 BALL = "ball"
 IGNORE = "ignore"
 EDGE_TOLERANCE_PX = 1.0
 """A ball centre at most this far outside the image (pixels) is moved onto its edge; further is an error."""
+MAX_IMAGE_SIDE = 65_536
+"""Largest image width or height (pixels) a file may state (16K video is 15,360 wide)."""
 
 
 # ---------------------------------------------------------------------------------------------- labels
@@ -109,37 +112,148 @@ class Key:
 
 
 @dataclass
+class RowTable:
+    """Ball rows as arrays, one row per entry.
+
+    Attributes:
+        frame: ``(N,) int64`` zero-based clip frames.
+        visibility: ``(N,) int8`` ball.csv codes 0..3.
+        xy: ``(N, 2) float64`` normalised ``(u, v)``, NaN where ``visibility == 0``.
+        source: ``(N,) int32`` index into :attr:`Rows.wheres`, the row's place in the file.
+    """
+
+    frame: np.ndarray
+    visibility: np.ndarray
+    xy: np.ndarray
+    source: np.ndarray
+
+    @classmethod
+    def empty(cls) -> RowTable:
+        return cls(np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros((0, 2)), np.zeros(0, np.int32))
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    def take(self, index: np.ndarray | slice) -> RowTable:
+        """The rows at ``index`` (a boolean mask, indices or a slice)."""
+        return RowTable(self.frame[index], self.visibility[index], self.xy[index], self.source[index])
+
+    @classmethod
+    def concat(cls, tables: list[RowTable]) -> RowTable:
+        if not tables:
+            return cls.empty()
+        keys = ("frame", "visibility", "xy", "source")
+        return cls(*(np.concatenate([getattr(t, k) for t in tables]) for k in keys))
+
+
 class Rows:
-    """Ball rows collected from several tracks: ``{frame: (visibility, u, v, where)}``."""
+    """Ball rows collected from several tracks, as arrays (memory in proportion to the rows).
 
-    path: Path
-    rows: dict[int, tuple[int, float, float, str]] = field(default_factory=dict)
+    Blocks of rows are added with :meth:`add`; :meth:`table` merges them, one row per frame: on a frame given
+    twice a visible row beats a hidden one, and two visible rows must agree.
+    """
 
-    def put(self, frame: int, visibility: int, xy: tuple[float, float] | None, where: str) -> None:
-        """Add a row; a frame given twice must agree (a visible row beats a hidden one)."""
-        u, v = xy if xy is not None else (np.nan, np.nan)
-        old = self.rows.get(frame)
-        if old is not None:
-            if visibility == 0:
-                return  # a hidden row never replaces a row (a visible one wins)
-            same = old[0] == visibility and np.allclose(old[1:3], (u, v), atol=1e-6)
-            if old[0] > 0 and not same:
-                raise FormatError(
-                    self.path,
-                    f"{where}: frame {frame} has a second, different ball position "
-                    f"(the first is at {old[3]})",
-                    fix="keep one ball track per frame: delete or split the overlapping track",
-                )
-        self.rows[frame] = (int(visibility), float(u), float(v), where)
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.wheres: list[str] = []
+        self._blocks: list[RowTable] = []
+        self._merged = True
+
+    def source(self, where: str) -> int:
+        """Register a place in the file (``line 57``, ``sequence[3] (interpolated)``); its index."""
+        self.wheres.append(where)
+        return len(self.wheres) - 1
+
+    def add(self, frame: np.ndarray, visibility: np.ndarray, xy: np.ndarray, source: np.ndarray) -> None:
+        """Add rows (arrays as in :class:`RowTable`, taken over; ``xy`` of hidden rows becomes NaN)."""
+        block = RowTable(
+            np.asarray(frame, np.int64),
+            np.asarray(visibility, np.int8),
+            np.asarray(xy, np.float64),
+            np.asarray(source, np.int32),
+        )
+        block.xy[block.visibility == 0] = np.nan
+        if len(block):
+            self._blocks.append(block)
+            self._merged = len(self._blocks) == 1 and bool(np.all(block.frame[1:] > block.frame[:-1]))
+
+    def table(self) -> RowTable:
+        """All rows merged, sorted by frame, one per frame (raises on two different visible rows)."""
+        if not self._merged:
+            self._blocks = [self._merge(RowTable.concat(self._blocks))]
+            self._merged = True
+        return self._blocks[0] if self._blocks else RowTable.empty()
+
+    def _merge(self, t: RowTable) -> RowTable:
+        if not np.all(t.frame[1:] > t.frame[:-1]):
+            # by frame, then visible rows first, then in the file's order
+            t = t.take(np.lexsort((np.arange(len(t)), t.visibility == 0, t.frame)))
+        first = np.r_[True, t.frame[1:] != t.frame[:-1]]
+        if first.all():
+            return t
+        again = np.flatnonzero(~first)  # rows on a frame seen before; compared with that frame's kept row
+        starts = np.flatnonzero(first)
+        kept = starts[np.searchsorted(starts, again, side="right") - 1]
+        same_xy = np.all(np.isclose(t.xy[again], t.xy[kept], atol=1e-6), axis=1)
+        visible = t.visibility[again] > 0
+        clash = np.flatnonzero(visible & ((t.visibility[again] != t.visibility[kept]) | ~same_xy))
+        if clash.size:
+            i, j = int(again[clash[0]]), int(kept[clash[0]])
+            raise FormatError(
+                self.path,
+                f"{self.wheres[t.source[i]]}: frame {int(t.frame[i])} has a second, different ball position "
+                f"(the first is at {self.wheres[t.source[j]]})",
+                fix="keep one ball track per frame: delete or split the overlapping track",
+            )
+        return t.take(first)
 
     def track(self) -> BallTrack:
         """The rows as a :class:`BallTrack` (sorted by frame)."""
-        if not self.rows:
+        t = self.table()
+        if not len(t):
             return BallTrack.empty()
-        frames = sorted(self.rows)
-        vis = [self.rows[f][0] for f in frames]
-        xy = [[self.rows[f][1], self.rows[f][2]] if self.rows[f][0] > 0 else [np.nan, np.nan] for f in frames]
-        return BallTrack(frames, vis, xy)
+        return BallTrack(t.frame, t.visibility, t.xy)
+
+
+def check_frame(
+    path: Path,
+    frame: int,
+    limit: int | None,
+    *,
+    where: str,
+    line: int | None = None,
+    shown: int | None = None,
+    stated: str = "",
+) -> None:
+    """A clip frame must lie in ``0 .. limit - 1`` (``limit``: the file's length, else :data:`MAX_FRAMES`).
+
+    Called on every frame number before anything is built from it, so a file naming frame 10^23 costs
+    nothing. ``shown`` is the number as the file writes it; ``stated`` says what ``limit`` is
+    ("the task's 30 frames"). The error names ``line`` when given (XML), else starts with ``where``.
+    """
+    if 0 <= frame < (limit if limit is not None else MAX_FRAMES):
+        return
+    prefix = "" if line is not None else f"{where}: "
+    number = frame if shown is None else shown
+    if frame < 0:
+        problem = f"{prefix}frame {number} lies before the first frame"
+        raise FormatError(path, problem, line=line, fix="check the frame number")
+    past = stated
+    if limit is None:
+        past = f"frame {MAX_FRAMES} ({MAX_FRAMES_TEXT}), the most a file that states no length may address"
+    raise FormatError(
+        path,
+        f"{prefix}frame {number} lies past {past}",
+        line=line,
+        fix="check the frame number, and that the file belongs to this video",
+    )
+
+
+def tighter(limit: int | None, stated: str, clip_frames: int | None) -> tuple[int | None, str]:
+    """The file's frame limit, or the clip's length when that is known and smaller (with its words)."""
+    if clip_frames is not None and (limit is None or clip_frames < limit):
+        return clip_frames, f"the clip's {clip_frames} frames"
+    return limit, stated
 
 
 def add_keyframe_track(rows: Rows, keys: list[Key], *, last_frame: int | None, end_marker: bool) -> bool:
@@ -149,6 +263,7 @@ def add_keyframe_track(rows: Rows, keys: list[Key], *, last_frame: int | None, e
     the visibility is the earlier key's; between a hidden-after key and the next, the ball is not in
     the frame (visibility 0). After the last key there are no rows. With ``end_marker`` (CVAT), a final
     hidden key only closes the track, unless it lies on ``last_frame``, the clip's last frame.
+    Frames must already be bounded (:func:`check_frame`): the rows between keys are built as arrays.
 
     Returns:
         True when the track stops on a key that would carry on (the tool repeats it to the end).
@@ -162,24 +277,35 @@ def add_keyframe_track(rows: Rows, keys: list[Key], *, last_frame: int | None, e
                 f"(the first is at {a.where})",
                 fix="keep one shape per frame and track",
             )
-    for i, key in enumerate(keys):
-        is_last = i == len(keys) - 1
-        if is_last and end_marker and key.xy is None and key.frame != last_frame and i > 0:
-            break
-        rows.put(key.frame, key.visibility if key.xy is not None else 0, key.xy, key.where)
-        if is_last:
-            break
-        nxt = keys[i + 1]
-        span = nxt.frame - key.frame
-        for f in range(key.frame + 1, nxt.frame):
-            if key.carry_on and key.xy is not None:
-                t = (f - key.frame) / span
-                end = nxt.xy if nxt.xy is not None else key.xy
-                xy = (key.xy[0] + t * (end[0] - key.xy[0]), key.xy[1] + t * (end[1] - key.xy[1]))
-                rows.put(f, key.visibility, xy, f"{key.where} (interpolated)")
-            else:
-                rows.put(f, 0, None, f"{key.where} (hidden)")
-    return bool(keys) and keys[-1].xy is not None and keys[-1].carry_on and keys[-1].frame != last_frame
+    if not keys:
+        return False
+    frame = np.array([k.frame for k in keys], np.int64)
+    vis = np.array([k.visibility if k.xy is not None else 0 for k in keys], np.int8)
+    xy = np.array([k.xy if k.xy is not None else (np.nan, np.nan) for k in keys], np.float64)
+    carry = np.array([k.carry_on and k.xy is not None for k in keys])
+    gap = np.append(np.diff(frame) - 1, 0)  # frames strictly between each key and the next
+    # the place named for a key's row, and for the frames after it ("(interpolated)" or "(hidden)")
+    own = np.array([rows.source(k.where) for k in keys], np.int32)
+    after = own.copy()
+    for j in np.flatnonzero(gap):
+        after[j] = rows.source(f"{keys[j].where} ({'interpolated' if carry[j] else 'hidden'})")
+    # one sorted block: each key's row, then the frames up to the next key
+    counts = gap + 1
+    step = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)  # 0 on a key
+    on_key = step == 0
+    nxt_xy = np.concatenate((xy[1:], xy[-1:]))
+    delta = np.where(np.isnan(nxt_xy), 0.0, nxt_xy - xy)  # towards the next key (stay when it is hidden)
+    row_xy = np.repeat(delta, counts, axis=0)
+    row_xy *= (step / np.repeat(gap + 1, counts))[:, None]
+    row_xy += np.repeat(xy, counts, axis=0)
+    row_vis = np.where(on_key, np.repeat(vis, counts), np.repeat(np.where(carry, vis, 0), counts))
+    row_src = np.where(on_key, np.repeat(own, counts), np.repeat(after, counts))
+    end = len(step)
+    if end_marker and len(keys) > 1 and keys[-1].xy is None and keys[-1].frame != last_frame:
+        end -= 1  # the closing outside key ends the track: no row of its own
+    rows.add(np.repeat(frame, counts)[:end] + step[:end], row_vis[:end], row_xy[:end], row_src[:end])
+    last = keys[-1]
+    return last.xy is not None and last.carry_on and last.frame != last_frame
 
 
 def runs(frames: np.ndarray) -> list[np.ndarray]:
@@ -370,16 +496,7 @@ def parse_xml(path: str | Path) -> XmlNode:
 
 
 # ------------------------------------------------------------------------------------ writing a clip
-def backup(path: Path, clip_root: Path) -> Path:
-    """Copy ``path`` to ``<clip>/.rally3d/backup/<name>.<YYYYmmdd-HHMMSS>`` and return the copy."""
-    folder = clip_root / ".rally3d" / "backup"
-    folder.mkdir(parents=True, exist_ok=True)
-    dest = folder / f"{path.name}.{time.strftime('%Y%m%d-%H%M%S')}"
-    shutil.copy2(path, dest)
-    return dest
-
-
-def _known_frames(clip: Clip) -> int | None:
+def known_frames(clip: Clip) -> int | None:
     """The clip's frame count: clip.yaml's, else the video's; None when neither can be read."""
     try:
         return clip.n_frames
@@ -418,7 +535,7 @@ def write_into_clip(
                     f"imported file is {imported.width}x{imported.height} (another aspect ratio)",
                     fix="import into the clip made from the same video",
                 )
-        n_frames = _known_frames(clip)
+        n_frames = known_frames(clip)
         if n_frames and imported.n_frames and imported.n_frames != n_frames:
             report.append(
                 f"warning: the file states {imported.n_frames} frames, the clip has {n_frames}: "
@@ -465,11 +582,15 @@ def write_into_clip(
             "exists already; nothing was written",
             fix="pass --overwrite to replace it (a backup goes to .rally3d/backup/)",
         )
-    for p in existing:
-        report.append(f"backup {backup(p, clip.root)}")
     if not clip.clip_yaml_path.is_file():
         clip.root.mkdir(parents=True, exist_ok=True)
         report.append(f"wrote {clip.write_info(info)}")
-    report.append(f"wrote {clip.write_ball(imported.ball)} ({len(imported.ball)} rows)")
-    report.append(f"wrote {clip.write_events(imported.events)} ({len(imported.events)} events)")
+    for path, write, what in (
+        (clip.ball_path, lambda t: write_ball_csv(t, imported.ball), f"{len(imported.ball)} rows"),
+        (clip.events_path, lambda t: write_events_csv(t, imported.events), f"{len(imported.events)} events"),
+    ):  # the one rule of the clip folder: a replaced file is backed up (.rally3d/backup/) and said so
+        done = replace_keeping_backup(path, write, log=None)
+        if done.backup is not None:
+            report.append(f"backup {done.backup}")
+        report.append(f"wrote {path} ({what})")
     return clip, report

@@ -2,12 +2,15 @@
 
 A CVAT task in interpolation mode holds ``<track label=...>`` elements of per-frame shapes with
 ``frame``, ``outside``, ``occluded`` and ``keyframe``. The ball is a ``points`` (or ``ellipse``, or
-``box``) track in pixels of ``meta/original_size``; events are tracks (or shapes) whose label is an
-event label, or root-level ``<tag frame label>`` elements.
+``box``) track in pixels of ``original_size`` (inside ``<meta><task>`` in a task export, in ``<meta>``
+after ``</job>`` in a job export); events are tracks (or shapes) whose label is an event label, or
+root-level ``<tag frame label>`` elements.
 """
 
 from __future__ import annotations
 
+import re
+from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
@@ -18,16 +21,21 @@ from inference.clipio.atomic import atomic_write_text
 
 from .common import (
     BALL,
+    MAX_FRAMES,
+    MAX_FRAMES_TEXT,
+    MAX_IMAGE_SIDE,
     Imported,
     Key,
     LabelMap,
     Rows,
     XmlNode,
     add_keyframe_track,
+    check_frame,
     check_frames_in_clip,
     labelled_runs,
     make_events,
     parse_xml,
+    tighter,
     to_unit,
 )
 
@@ -54,10 +62,20 @@ def _int(path: Path, node: XmlNode, name: str, default: int | None = None) -> in
     except ValueError:
         raise FormatError(
             path,
-            f"<{node.tag}> {name}={raw!r} is not a whole number",
+            f"<{node.tag}> {name}={_cut(raw)} is not a whole number" + _too_long(raw),
             line=node.line,
             fix="write a whole number",
         ) from None
+
+
+def _cut(text: str) -> str:
+    """``repr(text)``, cut to a readable length for a message."""
+    return repr(text) if len(text) <= 40 else repr(text[:37]) + "..."
+
+
+def _too_long(text: str) -> str:
+    """Why a run of thousands of digits is no number here (Python converts at most 4300)."""
+    return f" (it has {len(text.strip())} digits)" if re.fullmatch(r"\s*[+-]?\d{100,}\s*", text) else ""
 
 
 def _float(path: Path, node: XmlNode, name: str) -> float:
@@ -105,35 +123,62 @@ def _centre(path: Path, node: XmlNode) -> tuple[float, float]:
     return (xtl + xbr) / 2, (ytl + ybr) / 2
 
 
+@dataclass
 class _Frames:
-    """CVAT frame numbers -> clip frames: ``(frame - start_frame) / step``."""
+    """CVAT frame numbers -> clip frames: ``(frame - start) / step + offset``, checked against ``limit``.
 
-    def __init__(self, path: Path, start: int, step: int):
-        self.path, self.start, self.step = path, start, step
+    ``start`` is the first video frame of the export (a job's own start), ``offset`` the task frame it
+    is (the job's segment start), ``limit`` the frames a shape may lie on (None: :data:`MAX_FRAMES`).
+    """
 
-    def __call__(self, node: XmlNode) -> int:
+    path: Path
+    start: int
+    step: int
+    offset: int
+    limit: int | None
+    stated: str
+    kind: str = "task"
+
+    def __call__(self, node: XmlNode, *, closing: bool = False) -> int:
+        """The clip frame of ``node``; a ``closing`` outside shape may lie one frame past the end."""
         raw = _int(self.path, node, "frame")
         rel, rest = divmod(raw - self.start, self.step)
         if rel < 0 or rest:
             raise FormatError(
                 self.path,
-                f"frame {raw} is not a frame of the task (start frame {self.start}, step {self.step})",
+                f"frame {raw} is not a frame of the {self.kind} (start frame {self.start}, step {self.step})",
                 line=node.line,
-                fix="export the task again",
+                fix=f"export the {self.kind} again",
             )
-        return rel
+        limit = self.limit + 1 if closing and self.limit is not None else self.limit
+        frame = rel + self.offset
+        check_frame(self.path, frame, limit, where="", line=node.line, shown=raw, stated=self.stated)
+        return frame
 
 
-def _meta(path: Path, root: XmlNode) -> tuple[XmlNode, list[str]]:
+@dataclass
+class _Header:
+    """What the ``<meta>`` of an export says, checked and bounded."""
+
+    kind: str  # "task" or "job"
+    name: str
+    width: float
+    height: float
+    n_frames: int | None  # the task's length (None for a job: its <size> is the job's)
+    last_frame: int | None  # the last clip frame the export covers
+    frames: _Frames
+
+
+def _meta(path: Path, root: XmlNode) -> tuple[XmlNode, str, XmlNode]:
+    """``(<task> or <job>, "task" or "job", <meta>)``."""
     meta = root.find("meta")
-    warnings: list[str] = []
     if meta is None:
         raise FormatError(
             path, "no <meta> element", line=root.line, fix="export with CVAT's 'CVAT for video 1.1' format"
         )
-    for name in ("task", "job"):
-        if (node := meta.find(name)) is not None:
-            return node, warnings
+    for kind in ("task", "job"):
+        if (node := meta.find(kind)) is not None:
+            return node, kind, meta
     project = meta.find("project")
     if project is not None:
         tasks = (project.find("tasks") or XmlNode("tasks", {}, 0)).findall("task")
@@ -144,7 +189,7 @@ def _meta(path: Path, root: XmlNode) -> tuple[XmlNode, list[str]]:
                 line=project.line,
                 fix="export each task (one clip) on its own",
             )
-        return tasks[0], warnings
+        return tasks[0], "task", meta
     raise FormatError(
         path,
         "<meta> has no <task> or <job>",
@@ -153,17 +198,140 @@ def _meta(path: Path, root: XmlNode) -> tuple[XmlNode, list[str]]:
     )
 
 
-def import_cvat(path: str | Path, labels: LabelMap | None = None) -> Imported:
-    """Read a "CVAT for video 1.1" ``annotations.xml`` into a ball track and events.
+def _whole(path: Path, node: XmlNode | None, default: int, low: int, high: int, unit: str = "") -> int:
+    """The whole number in element ``node`` (``default`` when absent or empty), in ``low .. high``."""
+    if node is None or not node.text.strip():
+        return default
+    text = node.text.strip()
+    try:
+        value = int(text)
+    except ValueError:
+        raise FormatError(
+            path,
+            f"<{node.tag}> {_cut(text)} is not a whole number" + _too_long(text),
+            line=node.line,
+            fix="export the task again",
+        ) from None
+    if value < low:
+        raise FormatError(
+            path, f"<{node.tag}> {value} is less than {low}", line=node.line, fix="export the task again"
+        )
+    if value > high:
+        raise FormatError(
+            path,
+            f"<{node.tag}> {value} is more than {high}{unit}",
+            line=node.line,
+            fix="check the task: rally3d reads clips of at most " + MAX_FRAMES_TEXT,
+        )
+    return value
+
+
+def _step(path: Path, node: XmlNode | None) -> int:
+    """The frame step of ``<frame_filter>`` (``step=K``; empty: 1)."""
+    text = node.text.strip() if node is not None else ""
+    if not text:
+        return 1
+    found = re.fullmatch(r"step\s*=\s*(\d{1,9})", text)
+    if found is None or int(found.group(1)) == 0:
+        raise FormatError(
+            path,
+            f"<frame_filter> {text[:40]!r} is not a frame step (step=K with K = 1, 2, ...)",
+            line=node.line if node is not None else None,
+            fix="write the task's frame step as CVAT's task details show it, e.g. step=1 (every frame)",
+        )
+    return int(found.group(1))
+
+
+def _image_size(
+    path: Path, task: XmlNode, meta: XmlNode, size: tuple[int, int] | None
+) -> tuple[float, float]:
+    """``original_size`` (in ``<task>``, or in ``<meta>`` after ``</job>``), else ``size``."""
+    node = task.find("original_size")
+    if node is None:
+        node = meta.find("original_size")
+    if node is None:
+        if size is not None:
+            return float(size[0]), float(size[1])
+        raise FormatError(
+            path,
+            f"the {task.tag} has no <original_size>, so pixel positions cannot be scaled",
+            line=task.line,
+            fix="pass --width and --height (the video's frame size in pixels): CVAT states it only for "
+            "tasks made from a video file",
+        )
+    values = []
+    for name in ("width", "height"):
+        text = node.findtext(name) or ""
+        try:
+            value = float(text)
+        except ValueError:
+            value = float("nan")
+        if not (np.isfinite(value) and 0 < value <= MAX_IMAGE_SIDE):
+            raise FormatError(
+                path,
+                f"<original_size> <{name}> {text[:40]!r} is not a frame size (1 to {MAX_IMAGE_SIDE} pixels)",
+                line=node.line,
+                fix="write the video's frame size there, or delete <original_size> and pass --width "
+                "and --height",
+            )
+        values.append(value)
+    return values[0], values[1]
+
+
+def _header(
+    path: Path, root: XmlNode, size: tuple[int, int] | None, clip_frames: int | None
+) -> tuple[_Header, list[str]]:
+    """Read and bound the export's ``<meta>``: layout, frame size, length, start frame and step."""
+    task, kind, meta = _meta(path, root)
+    width, height = _image_size(path, task, meta, size)
+    length = _whole(path, task.find("size"), 0, 1, MAX_FRAMES, f" frames ({MAX_FRAMES_TEXT})") or None
+    start = _whole(path, task.find("start_frame"), 0, 0, 10**12)
+    step = _step(path, task.find("frame_filter"))
+    offset = 0
+    if kind == "job":  # frames are the task's: the job starts at its segment's first frame
+        segments = task.find("segments")
+        segment = segments.find("segment") if segments is not None else None
+        offset = _whole(path, segment.find("start") if segment is not None else None, 0, 0, MAX_FRAMES)
+    warnings = []
+    task_start = start - offset * step
+    if task_start or step != 1:
+        warnings.append(
+            f"{path}: task frames start at video frame {task_start} with step {step}; clip frame i is "
+            f"video frame {task_start} + {step}*i"
+        )
+    if kind == "task":
+        limit, stated, n_frames = length, f"the task's {length} frames", length
+    else:
+        limit = offset + length if length else None
+        stated, n_frames = f"the job's frames (task frames {offset} to {offset + (length or 1) - 1})", None
+    last_frame = limit - 1 if limit else None
+    frames = _Frames(path, start, step, offset, *tighter(limit, stated, clip_frames), kind)
+    name = task.findtext("name") or ""
+    header = _Header(kind, name, width, height, n_frames, last_frame, frames)
+    return header, warnings
+
+
+def import_cvat(
+    path: str | Path,
+    labels: LabelMap | None = None,
+    *,
+    size: tuple[int, int] | None = None,
+    clip_frames: int | None = None,
+) -> Imported:
+    """Read a "CVAT for video 1.1" ``annotations.xml`` (a task or a job export) into a ball track and events.
 
     Args:
         path: the XML file (unzipped from CVAT's export).
         labels: which labels are the ball and which are events (default: ``ball`` and the nine
             event labels of docs/formats.md §9).
+        size: ``(width, height)`` of the video, used when the file states no ``original_size``.
+        clip_frames: the length of the clip the labels go into, when known: frames must lie below it
+            (checked, like the file's own length, before anything is built).
 
     Returns:
         :class:`~inference.interchange.common.Imported`; frames are task frames counted from the task's
         start frame (divided by its frame step); coordinates are normalised by ``original_size``.
+        ``n_frames`` is the task's ``<size>`` (None for a job export, whose size is the job's).
     """
     path = Path(path)
     labels = labels or LabelMap()
@@ -179,7 +347,7 @@ def import_cvat(path: str | Path, labels: LabelMap | None = None) -> Imported:
     version = root.findtext("version")
     if version and not version.startswith("1."):
         warnings.append(f"{path}: format version {version}; this reader knows 1.1")
-    task, _ = _meta(path, root)
+    _meta(path, root)
     if root.findall("image"):
         raise FormatError(
             path,
@@ -187,35 +355,9 @@ def import_cvat(path: str | Path, labels: LabelMap | None = None) -> Imported:
             line=root.findall("image")[0].line,
             fix="export the task again as 'CVAT for video 1.1'",
         )
-    width_text, height_text = task.findtext("original_size/width"), task.findtext("original_size/height")
-    try:
-        width, height = float(width_text or "nan"), float(height_text or "nan")
-        size_text = task.findtext("size")
-        n_frames = int(size_text) if size_text else None
-        start = int(task.findtext("start_frame") or 0)
-        step_text = (task.findtext("frame_filter") or "").strip()
-        step = int(step_text.split("=")[1]) if step_text.startswith("step=") else 1
-    except (ValueError, IndexError):
-        raise FormatError(
-            path,
-            "the task's <size>, <original_size>, <start_frame> or <frame_filter> is not a number",
-            line=task.line,
-            fix="export the task again",
-        ) from None
-    if not (np.isfinite(width) and np.isfinite(height) and width > 0 and height > 0):
-        raise FormatError(
-            path,
-            "the task has no <original_size> with <width> and <height>",
-            line=task.line,
-            fix="export with 'CVAT for video 1.1' (it states the frame size)",
-        )
-    if start or step != 1:
-        warnings.append(
-            f"{path}: task frames start at video frame {start} with step {step}; clip frame i is "
-            f"video frame {start} + {step}*i"
-        )
-    clip_frame = _Frames(path, start, step)
-    last_frame = n_frames - 1 if n_frames else None
+    head, notes = _header(path, root, size, clip_frames)
+    warnings += notes
+    clip_frame, width, height = head.frames, head.width, head.height
 
     rows = Rows(path)
     found: dict[int, list[tuple[str, str]]] = {}
@@ -237,10 +379,10 @@ def import_cvat(path: str | Path, labels: LabelMap | None = None) -> Imported:
         if kind != BALL:
             continue
         keys = [_ball_key(path, shape, clip_frame, width, height) for shape in shapes]
-        if add_keyframe_track(rows, keys, last_frame=last_frame, end_marker=True):
+        if add_keyframe_track(rows, keys, last_frame=head.last_frame, end_marker=True):
             warnings.append(
                 f"{path}, line {track.line}: the ball track ends on a visible keyframe; CVAT "
-                "repeats it to the end of the task, rows stop at that keyframe"
+                f"repeats it to the end of the {head.kind}, rows stop at that keyframe"
             )
     for tag in root.findall("tag"):
         name = tag.attrib.get("label", "")
@@ -255,19 +397,13 @@ def import_cvat(path: str | Path, labels: LabelMap | None = None) -> Imported:
             + labels.unknown_hint(name)
         )
     ball = rows.track()
-    check_frames_in_clip(path, ball, n_frames)
-    events = make_events(path, found, n_frames)
-    name = task.findtext("name") or path.stem
-    return Imported(
-        ball,
-        events,
-        round(width),
-        round(height),
-        n_frames,
-        None,
-        f"CVAT task {name!r} ({path.name})",
-        warnings,
-    )
+    check_frames_in_clip(path, ball, head.n_frames)
+    events = make_events(path, found, head.n_frames)
+    if head.kind == "task":
+        source = f"CVAT task {head.name or path.stem!r} ({path.name})"
+    else:
+        source = f"CVAT job {root.findtext('meta/job/id') or '?'} ({path.name})"
+    return Imported(ball, events, round(width), round(height), head.n_frames, None, source, warnings)
 
 
 def _ball_key(path: Path, shape: XmlNode, clip_frame: _Frames, width: float, height: float) -> Key:
@@ -279,8 +415,9 @@ def _ball_key(path: Path, shape: XmlNode, clip_frame: _Frames, width: float, hei
             line=shape.line,
             fix="draw the ball with the points (or ellipse) tool",
         )
-    frame = clip_frame(shape)
-    if _flag(path, shape, "outside"):
+    outside = _flag(path, shape, "outside")
+    frame = clip_frame(shape, closing=outside)
+    if outside:
         return Key(frame, None, 0, False, where)
     visibility = 3 if _flag(path, shape, "occluded") else 1
     for attribute in shape.findall("attribute"):

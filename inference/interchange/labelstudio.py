@@ -2,14 +2,19 @@
 
 Label Studio's JSON export is a list of tasks; each has ``annotations``, each a ``result`` list of
 regions. The ball is a ``videorectangle`` region (or any region with a keypoint ``sequence``): keyframes
-``{"frame", "enabled", "x", "y"[, "width", "height"]}`` with 1-based frames and coordinates in percent of
-the frame. Events and visibility spans are ``timelinelabels`` regions: ``{"ranges": [{"start", "end"}],
+``{"frame", "enabled", "x", "y"[, "width", "height"], "time"}`` with 1-based frames, coordinates in percent
+of the frame and ``time = frame / frame rate`` (as Label Studio's editor, converter and ML backend write
+it). Events and visibility spans are ``timelinelabels`` regions: ``{"ranges": [{"start", "end"}],
 "timelinelabels": [label]}``, 1-based, inclusive.
 """
 
 from __future__ import annotations
 
+import heapq
 import json
+import math
+import reprlib
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -19,13 +24,34 @@ from inference.clipio import BallTrack, FormatError, HitEvents
 from inference.clipio.atomic import atomic_write_text
 from inference.clipio.csvtable import read_text
 
-from .common import BALL, Imported, Key, LabelMap, Rows, add_keyframe_track, labelled_runs, make_events, runs
+from .common import (
+    BALL,
+    MAX_FRAMES,
+    MAX_FRAMES_TEXT,
+    MAX_IMAGE_SIDE,
+    Imported,
+    Key,
+    LabelMap,
+    Rows,
+    RowTable,
+    add_keyframe_track,
+    check_frame,
+    labelled_runs,
+    make_events,
+    runs,
+    tighter,
+)
 
 VISIBILITY_LABELS: dict[str, int] = {"out_of_frame": 0, "hard_to_see": 2, "occluded": 3}
 """Timeline labels that set ball.csv's visibility on the frames they cover (default 1)."""
 
 BOX_PX = 12.0
 """Side of the square box written around the ball on export (pixels); shrunk at the image edge."""
+
+MAX_FPS = 1000.0
+"""Highest frame rate a file may state (``data.fps``, ``framesCount / duration``)."""
+RATE_TOLERANCE = 0.05
+"""Keyframe times that imply a frame rate this far (relative) from the task's ``data.fps`` get a warning."""
 
 TIMELINE_TYPES = ("timelinelabels",)
 BOX_NAME, TIMELINE_NAME = "box", "events"
@@ -36,17 +62,46 @@ def _fail(path: Path, where: str, problem: str, fix: str) -> FormatError:
     return FormatError(path, f"{where}: {problem}", fix=fix)
 
 
+def _short_repr() -> reprlib.Repr:
+    short = reprlib.Repr()
+    short.maxlevel, short.maxstring, short.maxother, short.maxlist, short.maxdict = 2, 40, 40, 4, 4
+    return short
+
+
+_REPR = _short_repr()
+
+
+def _show(value: Any) -> str:
+    """A short ``repr`` of any JSON value for a message (safe for deep or huge values)."""
+    return _REPR.repr(value)
+
+
 def _load(path: Path) -> Any:
+    """The parsed JSON (:class:`FormatError` for anything that is not JSON Python can hold)."""
     text = read_text(path)
+    fix = "export the project again from Label Studio as JSON"
     try:
         return json.loads(text)
     except json.JSONDecodeError as e:
-        raise FormatError(
-            path,
-            f"not valid JSON ({e.msg}, column {e.colno})",
-            line=e.lineno,
-            fix="export the project again from Label Studio as JSON",
-        ) from None
+        problem = f"not valid JSON ({e.msg}, column {e.colno})"
+        raise FormatError(path, problem, line=e.lineno, fix=fix) from None
+    except RecursionError:
+        raise FormatError(path, "not a Label Studio export: nested too deeply", fix=fix) from None
+    except ValueError:  # an integer with more digits than Python converts (4300)
+        problem = "not valid JSON for Python: a number with thousands of digits"
+        raise FormatError(path, problem, fix=fix) from None
+
+
+def _data(task: dict) -> dict:
+    """The task's ``data`` (empty when it is not a mapping)."""
+    return task["data"] if isinstance(task.get("data"), dict) else {}
+
+
+def _video(task: dict) -> str:
+    """The task's ``data.video`` as printable text (a lone surrogate of a JSON escape is spelt out)."""
+    video = _data(task).get("video", "")
+    text = video if isinstance(video, str) else _show(video)
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _tasks(path: Path, data: Any) -> list[dict]:
@@ -68,12 +123,27 @@ def _tasks(path: Path, data: Any) -> list[dict]:
     return data
 
 
+def _entries(path: Path, where: str, task: dict, key: str) -> list[dict]:
+    """The task's ``annotations`` or ``predictions``: a list of objects (absent or null: none)."""
+    value = task.get(key)
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise _fail(
+            path,
+            where,
+            f"{key!r} is {_show(value)}, not a list",
+            fix="use Label Studio's 'JSON' export (not JSON-MIN, CSV or COCO)",
+        )
+    return [v for v in value if isinstance(v, dict)]
+
+
 def _pick(path: Path, items: list[dict], wanted: int | None, what: str, fix: str) -> tuple[int, dict]:
     if wanted is not None:
         for i, item in enumerate(items):
             if item.get("id") == wanted:
                 return i, item
-        ids = ", ".join(str(t.get("id")) for t in items)
+        ids = ", ".join(_show(t.get("id")) for t in items)
         raise FormatError(path, f"no {what} with id {wanted} (ids: {ids})", fix=fix)
     return 0, items[0]
 
@@ -82,12 +152,18 @@ def _number(path: Path, where: str, item: dict, key: str, *, required: bool = Tr
     value = item.get(key)
     if value is None and not required:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise _fail(path, where, f"{key!r} is {value!r}, not a number", fix=f"write {key} as a number")
-    return float(value)
+    number = math.nan  # not a number: text, true/false, a list, an int beyond a float's range
+    if type(value) is float:
+        number = value
+    elif type(value) is int and abs(value) < 2**63:
+        number = float(value)
+    if not math.isfinite(number):
+        raise _fail(path, where, f"{key!r} is {_show(value)}, not a number", fix=f"write {key} as a number")
+    return number
 
 
-def _frame(path: Path, where: str, item: dict, key: str) -> int:
+def _frame(path: Path, where: str, item: dict, key: str, limit: tuple[int | None, str]) -> int:
+    """``item[key]``, a 1-based frame, as a clip frame below ``limit`` ((frames, words); None: MAX_FRAMES)."""
     value = _number(path, where, item, key)
     if value != int(value) or value < 1:
         raise _fail(
@@ -96,13 +172,36 @@ def _frame(path: Path, where: str, item: dict, key: str) -> int:
             f"{key!r} is {value:g}, not a frame number >= 1",
             fix="Label Studio counts video frames from 1",
         )
-    return int(value) - 1
+    frame = int(value) - 1
+    check_frame(path, frame, limit[0], where=where, shown=frame + 1, stated=limit[1])
+    return frame
+
+
+def _frames_count(path: Path, where: str, value: dict) -> int | None:
+    """``value.framesCount`` (None when absent or not a whole number), at most :data:`MAX_FRAMES`."""
+    count = value.get("framesCount")
+    if isinstance(count, bool) or not isinstance(count, int) or count <= 0:
+        return None
+    if count > MAX_FRAMES:
+        raise _fail(
+            path,
+            where,
+            f"framesCount {count} is more than {MAX_FRAMES} frames ({MAX_FRAMES_TEXT})",
+            fix="check the task's video; rally3d reads clips of at most " + MAX_FRAMES_TEXT,
+        )
+    return count
+
+
+def _rate(value: Any) -> float | None:
+    """``value`` as a frame rate in ``(0, MAX_FPS]``, else None."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and 0 < value <= MAX_FPS
+    return float(value) if ok else None
 
 
 def _labels(value: dict) -> list[str]:
     for key in ("labels", "timelinelabels", "videorectangle", "keypointlabels", "rectanglelabels"):
         if isinstance(value.get(key), list):
-            return [str(v) for v in value[key]]
+            return [v if isinstance(v, str) else _show(v) for v in value[key]]
     return []
 
 
@@ -112,6 +211,7 @@ def import_labelstudio(
     *,
     task: int | None = None,
     annotation: int | None = None,
+    clip_frames: int | None = None,
 ) -> Imported:
     """Read one task of a Label Studio JSON export into a ball track and events.
 
@@ -121,6 +221,8 @@ def import_labelstudio(
             :data:`VISIBILITY_LABELS` set the ball's visibility.
         task: the task id, when the file holds several tasks.
         annotation: the annotation id, when the task has several (default: the first not cancelled).
+        clip_frames: the length of the clip the labels go into, when known: frames must lie below it
+            (checked, like ``framesCount``, before anything is built).
 
     Returns:
         :class:`~inference.interchange.common.Imported` (no image size: coordinates are percentages).
@@ -131,21 +233,19 @@ def import_labelstudio(
     if not tasks:
         raise FormatError(path, "the export holds no task", fix="export a project with annotated tasks")
     if len(tasks) > 1 and task is None:
-        listing = "; ".join(
-            f"{t.get('id')}: {str((t.get('data') or {}).get('video', ''))[-40:]}" for t in tasks[:10]
-        )
+        listing = "; ".join(f"{_show(t.get('id'))}: {_video(t)[-40:]}" for t in tasks[:10])
         raise FormatError(
             path,
             f"{len(tasks)} tasks in the file ({listing})",
             fix="choose one with --task ID (one task = one clip)",
         )
     ti, chosen = _pick(path, tasks, task, "task", "pass an id from the file")
-    where_task = f"task {chosen.get('id', ti)}"
+    where_task = f"task {_show(chosen.get('id', ti))}"
     warnings: list[str] = []
-    anns = [a for a in (chosen.get("annotations") or []) if isinstance(a, dict)]
+    anns = _entries(path, where_task, chosen, "annotations")
     live = [a for a in anns if not a.get("was_cancelled")]
     if not live:
-        preds = [p for p in (chosen.get("predictions") or []) if isinstance(p, dict)]
+        preds = _entries(path, where_task, chosen, "predictions")
         if not preds:
             raise FormatError(
                 path, f"{where_task} has no annotation", fix="annotate the task, or pick another"
@@ -155,10 +255,10 @@ def import_labelstudio(
     if annotation is None and len(live) > 1:
         warnings.append(
             f"{path}: {where_task} has {len(live)} annotations; read the first "
-            f"(id {live[0].get('id')}), choose another with --annotation ID"
+            f"(id {_show(live[0].get('id'))}), choose another with --annotation ID"
         )
     ai, ann = _pick(path, live, annotation, "annotation", "pass an annotation id of the task")
-    where_ann = f"{where_task}, annotation {ann.get('id', ai)}"
+    where_ann = f"{where_task}, annotation {_show(ann.get('id', ai))}"
     result = ann.get("result")
     if not isinstance(result, list):
         raise _fail(path, where_ann, "has no 'result' list", fix="export the project again as JSON")
@@ -174,11 +274,11 @@ def import_labelstudio(
         value = region["value"]
         names = _labels(value)
         if "sequence" in value:
-            if isinstance(value.get("framesCount"), int) and value["framesCount"] > 0:
-                n_frames = value["framesCount"]
+            if (count := _frames_count(path, where, value)) is not None:
+                n_frames = count
                 duration = value.get("duration")
-                if isinstance(duration, (int, float)) and duration > 0:
-                    fps = round(n_frames / duration, 3)
+                if isinstance(duration, (int, float)) and not isinstance(duration, bool) and duration > 0:
+                    fps = _rate(round(n_frames / duration, 3)) or fps
             name = names[0] if names else BALL
             kind = labels.kind(name)
             if kind == BALL:
@@ -199,22 +299,25 @@ def import_labelstudio(
 
     rows = Rows(path)
     last_frame = n_frames - 1 if n_frames else None
+    limit = tighter(n_frames, f"the video's {n_frames} frames (framesCount {n_frames})", clip_frames)
+    times: list[tuple[str, float]] = []
     for where, sequence in ball_regions:
-        keys = [
-            _key(path, f"{where}, sequence[{i}]", item) for i, item in enumerate(_list(path, where, sequence))
-        ]
+        items = _list(path, where, sequence)
+        keys = [_key(path, f"{where}, sequence[{i}]", item, limit) for i, item in enumerate(items)]
+        times += [(where, rate) for key, item in zip(keys, items) if (rate := _key_rate(key, item))]
         if add_keyframe_track(rows, keys, last_frame=last_frame, end_marker=False):
             warnings.append(
                 f"{path}: {where}: the ball's last keyframe has interpolation on; rows stop there"
             )
 
     found: dict[int, list[tuple[str, str]]] = {}
+    spans: list[tuple[str, int, int, int]] = []
     for where, value, names in timeline:
-        for ri, (start, end) in enumerate(_ranges(path, where, value)):
+        for ri, (start, end) in enumerate(_ranges(path, where, value, limit)):
             where_r = f"{where}, ranges[{ri}]"
             for name in names:
                 if name in VISIBILITY_LABELS:
-                    _set_visibility(rows, where_r, range(start, end + 1), VISIBILITY_LABELS[name])
+                    spans.append((where_r, start, end, VISIBILITY_LABELS[name]))
                     continue
                 kind = labels.kind(name)
                 if kind == "event":
@@ -237,25 +340,72 @@ def import_labelstudio(
                     )
     for name, count in sorted(skipped.items()):
         warnings.append(f"{path}: skipped {count} region(s) labelled {name!r}: " + labels.unknown_hint(name))
+    _apply_visibility(rows, spans)
     ball = rows.track()
     events = make_events(path, found, n_frames)
-    data = chosen.get("data") if isinstance(chosen.get("data"), dict) else {}
-    video = str(data.get("video", ""))
-    stated_fps = data.get("fps")
-    if isinstance(stated_fps, (int, float)) and not isinstance(stated_fps, bool) and stated_fps > 0:
-        fps = float(stated_fps)  # the task's own frame rate (the labeling config's frameRate="$fps")
-    source = f"Label Studio task {chosen.get('id')}" + (f" ({Path(video).name})" if video else "")
-    width, height = _stated_size(chosen)
+    data = _data(chosen)
+    video = _video(chosen)
+    stated_fps = _stated_fps(path, where_task, data)
+    if stated_fps is not None:
+        fps = stated_fps  # the task's own frame rate (the labeling config's frameRate="$fps")
+        warnings += _rate_warnings(path, times, stated_fps)
+    source = f"Label Studio task {_show(chosen.get('id'))}" + (f" ({Path(video).name})" if video else "")
+    width, height = _stated_size(path, where_task, chosen)
     return Imported(ball, events, width, height, n_frames, fps, source, warnings)
 
 
-def _stated_size(task: dict) -> tuple[int | None, int | None]:
+def _stated_fps(path: Path, where: str, data: dict) -> float | None:
+    """The task's ``data.fps`` (None when absent or not a number; an error when not a frame rate)."""
+    value = data.get("fps")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    if _rate(value) is None:
+        raise _fail(
+            path,
+            where,
+            f"data.fps is {_show(value)}, not a frame rate (0 to {MAX_FPS:g})",
+            fix="write the video's frame rate",
+        )
+    return float(value)
+
+
+def _key_rate(key: Key, item: dict) -> float | None:
+    """The frame rate a keyframe's ``time`` implies (Label Studio writes time = frame / frameRate)."""
+    time = item.get("time")
+    if isinstance(time, bool) or not isinstance(time, (int, float)) or not 0 < time < float("inf"):
+        return None
+    return (key.frame + 1) / time
+
+
+def _rate_warnings(path: Path, times: list[tuple[str, float]], fps: float) -> list[str]:
+    """A warning when keyframe times say Label Studio counted frames at another rate than ``fps``."""
+    if not times:
+        return []
+    implied = float(np.median([rate for _, rate in times]))
+    if abs(implied / fps - 1) <= RATE_TOLERANCE:
+        return []
+    return [
+        f"{path}: {times[0][0]}: keyframe times give {implied:.4g} fps (Label Studio writes time = frame / "
+        f"frameRate), the task states {fps:g} fps: the labeling config's frameRate is not the video's, so "
+        'its frame numbers drift from the video\'s; set frameRate="$fps" on <Video> and check the boxes'
+    ]
+
+
+def _stated_size(path: Path, where: str, task: dict) -> tuple[int | None, int | None]:
     """The image size rally3d's export keeps in the task's ``meta`` (Label Studio itself states none)."""
     meta = task.get("meta") if isinstance(task.get("meta"), dict) else {}
     ours = meta.get("rally3d") if isinstance(meta.get("rally3d"), dict) else {}
     w, h = ours.get("width"), ours.get("height")
-    ok = all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (w, h))
-    return (w, h) if ok else (None, None)
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (w, h)):
+        return None, None
+    if not all(0 < v <= MAX_IMAGE_SIDE for v in (w, h)):
+        raise _fail(
+            path,
+            where,
+            f"meta.rally3d states a {_show(w)}x{_show(h)} image",
+            fix=f"write a width and height of 1 to {MAX_IMAGE_SIDE} pixels, or delete meta.rally3d",
+        )
+    return w, h
 
 
 def _list(path: Path, where: str, value: Any) -> list[dict]:
@@ -266,8 +416,8 @@ def _list(path: Path, where: str, value: Any) -> list[dict]:
     return value
 
 
-def _key(path: Path, where: str, item: dict) -> Key:
-    frame = _frame(path, where, item, "frame")
+def _key(path: Path, where: str, item: dict, limit: tuple[int | None, str]) -> Key:
+    frame = _frame(path, where, item, "frame", limit)
     x, y = _number(path, where, item, "x"), _number(path, where, item, "y")
     w = _number(path, where, item, "width", required=False) or 0.0
     h = _number(path, where, item, "height", required=False) or 0.0
@@ -285,7 +435,7 @@ def _key(path: Path, where: str, item: dict) -> Key:
     return Key(frame, (min(max(u, 0.0), 1.0), min(max(v, 0.0), 1.0)), 1, enabled, where)
 
 
-def _ranges(path: Path, where: str, value: dict) -> list[tuple[int, int]]:
+def _ranges(path: Path, where: str, value: dict, limit: tuple[int | None, str]) -> list[tuple[int, int]]:
     ranges = value.get("ranges")
     if not isinstance(ranges, list) or not ranges:
         raise _fail(path, where, "timeline region without 'ranges'", fix="export the project again as JSON")
@@ -296,8 +446,8 @@ def _ranges(path: Path, where: str, value: dict) -> list[tuple[int, int]]:
                 path, f"{where}, ranges[{i}]", "is not {start, end}", fix='write {"start": F, "end": F}'
             )
         start, end = (
-            _frame(path, f"{where}, ranges[{i}]", r, "start"),
-            _frame(path, f"{where}, ranges[{i}]", r, "end"),
+            _frame(path, f"{where}, ranges[{i}]", r, "start", limit),
+            _frame(path, f"{where}, ranges[{i}]", r, "end", limit),
         )
         if end < start:
             raise _fail(
@@ -310,27 +460,79 @@ def _ranges(path: Path, where: str, value: dict) -> list[tuple[int, int]]:
     return out
 
 
-def _set_visibility(rows: Rows, where: str, frames: range, visibility: int) -> None:
-    for f in frames:
-        old = rows.rows.get(f)
-        if visibility == 0:
-            if old is not None and old[0] > 0:
-                raise _fail(
-                    rows.path,
-                    where,
-                    f"frame {f + 1} is out_of_frame but has a ball box ({old[3]})",
-                    fix="shorten the out_of_frame span or delete the box on that frame",
-                )
-            rows.rows[f] = (0, np.nan, np.nan, where)
+def _apply_visibility(rows: Rows, spans: list[tuple[str, int, int, int]]) -> None:
+    """Apply the timeline's visibility spans ``(where, first, last clip frame, code)``, in file order.
+
+    ``out_of_frame`` (0) adds hidden rows and may cover no box; ``hard_to_see``/``occluded`` (2/3) set the
+    visibility of the boxes they cover and must cover only boxes; where those overlap, the later span wins.
+    Each span is checked in O(log rows); painting and the hidden rows cost O(rows + spans log spans), so
+    many long spans cost no more than the rows they make.
+    """
+    if not spans:
+        return
+    table = rows.table()
+    boxed = np.r_[0, np.cumsum(table.visibility > 0)]  # boxes before each row
+    bounds = np.searchsorted(table.frame, [(start, end + 1) for _, start, end, _ in spans])
+    for (where, start, end, code), (lo, hi) in zip(spans, bounds.tolist()):
+        n_boxed = int(boxed[hi] - boxed[lo])
+        if code == 0 and n_boxed:
+            i = lo + int(np.argmax(table.visibility[lo:hi] > 0))
+            raise _fail(
+                rows.path,
+                where,
+                f"frame {int(table.frame[i]) + 1} is out_of_frame but has a ball box "
+                f"({rows.wheres[table.source[i]]})",
+                fix="shorten the out_of_frame span or delete the box on that frame",
+            )
+        if code and n_boxed != end - start + 1:
+            have = table.frame[lo:hi][table.visibility[lo:hi] > 0]
+            gaps = np.flatnonzero(have != start + np.arange(len(have)))
+            missing = start + (int(gaps[0]) if gaps.size else len(have))
+            raise _fail(
+                rows.path,
+                where,
+                f"frame {missing + 1} is marked {code} (hard to see/occluded) but has no ball box",
+                fix="draw the box on that frame or shorten the span",
+            )
+    _paint(table, [(start, end, code, k) for k, (_, start, end, code) in enumerate(spans) if code])
+    hidden = _union([(start, end, where) for where, start, end, code in spans if code == 0])
+    if hidden:
+        first = np.array([h[0] for h in hidden], np.int64)
+        count = np.array([h[1] - h[0] + 1 for h in hidden], np.int64)
+        n = int(count.sum())
+        frames = np.repeat(first - (np.cumsum(count) - count), count) + np.arange(n)
+        places = np.repeat(np.array([rows.source(h[2]) for h in hidden], np.int64), count)
+        rows.add(frames, np.zeros(n), np.full((n, 2), np.nan), places)
+
+
+def _paint(table: RowTable, marks: list[tuple[int, int, int, int]]) -> None:
+    """Set ``table``'s visibility over spans ``(first, last frame, code, order)``; the latest order wins."""
+    if not marks:
+        return
+    points = sorted({m[0] for m in marks} | {m[1] + 1 for m in marks})
+    marks = sorted(marks)
+    active: list[tuple[int, int, int]] = []  # (-order, last frame, code): the latest span on top
+    j = 0
+    for a, b in pairwise(points):
+        while j < len(marks) and marks[j][0] <= a:
+            heapq.heappush(active, (-marks[j][3], marks[j][1], marks[j][2]))
+            j += 1
+        while active and active[0][1] < a:
+            heapq.heappop(active)
+        if active:
+            lo, hi = np.searchsorted(table.frame, [a, b])
+            table.visibility[lo:hi] = active[0][2]
+
+
+def _union(spans: list[tuple[int, int, str]]) -> list[tuple[int, int, str]]:
+    """Overlapping or touching spans ``(first, last, where)`` joined (each keeps its first ``where``)."""
+    out: list[tuple[int, int, str]] = []
+    for start, end, where in sorted(spans, key=lambda s: (s[0], s[1])):
+        if out and start <= out[-1][1] + 1:
+            out[-1] = (out[-1][0], max(out[-1][1], end), out[-1][2])
         else:
-            if old is None or old[0] == 0:
-                raise _fail(
-                    rows.path,
-                    where,
-                    f"frame {f + 1} is marked {visibility} (hard to see/occluded) but has no ball box",
-                    fix="draw the box on that frame or shorten the span",
-                )
-            rows.rows[f] = (visibility, old[1], old[2], old[3])
+            out.append((start, end, where))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------- export
@@ -380,7 +582,7 @@ def export_labelstudio(
                     "y": 100 * (v - hh),
                     "width": 200 * hw,
                     "height": 200 * hh,
-                    "time": round(int(track.frame[i]) / fps, 6),
+                    "time": round((int(track.frame[i]) + 1) / fps, 6),  # Label Studio's frame / fps
                 }
             )
         result.append(

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from inference.camera import Camera
 from inference.clipio import Clip, ClipInfo, FormatError
+from inference.clipio.span import Span
 
 VIDEO_SUFFIXES = {".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"}
 
@@ -86,30 +87,8 @@ def video_notes(path: Path) -> list[str]:
         return []
 
 
-@dataclass(frozen=True)
-class Cut:
-    """A stretch of a long video, in seconds: ``[start_s, end_s)`` (None: from the start / to the end)."""
-
-    start_s: float | None = None
-    end_s: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.start_s is not None and self.start_s < 0:
-            raise ValueError(f"--start must be ≥ 0 seconds, got {self.start_s}")
-        if self.start_s is not None and self.end_s is not None and self.end_s <= self.start_s:
-            raise ValueError(f"--end ({self.end_s} s) must come after --start ({self.start_s} s)")
-
-    @property
-    def active(self) -> bool:
-        return self.start_s is not None or self.end_s is not None
-
-    def frames(self, fps: float, n: int) -> tuple[int, int]:
-        """First frame and the frame after the last, clamped to the video's ``n`` frames."""
-        first = int(round((self.start_s or 0.0) * fps))
-        stop = n if self.end_s is None else min(n, int(round(self.end_s * fps)))
-        if first >= stop:
-            raise ValueError(f"--start {self.start_s} s is at or past the end of the video ({n / fps:.1f} s)")
-        return first, stop
+#: a stretch of a long video, in seconds (``--start``/``--end``); the same as the other commands' stretches
+Cut = Span
 
 
 def prepare(source: Path, out: Path | None, court: str | None, camera: Path | None = None,

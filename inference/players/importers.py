@@ -715,7 +715,7 @@ def _csv_columns(table: CsvTable, columns: tuple[str, ...]) -> np.ndarray:
         absent = [c for c in columns if c not in present]
         raise FormatError(table.path, f"has column(s) {present} but not {absent}", line=1,
                           fix=f"write all of {','.join(columns)} or none")
-    return np.stack([table.floats(c, allow_empty=True) for c in columns], axis=1).reshape(len(table), -1)
+    return np.stack([table.floats(c, allow_empty=True) for c in columns], axis=1)  # (N, k), N = 0 too
 
 
 _FRAME_READERS: dict[str, Callable[[object, _Where, _Options], list[_Person]]] = {

@@ -105,17 +105,29 @@ def clips_with_source(root, split: str, seed: int = 0, sources=None, players: bo
         if len(labelled) < len(clips):
             log.warning("%s (%s): %d clip(s) without events.csv skipped (events not labelled yet): %s", src.root,
                         split, len(clips) - len(labelled), ", ".join(c.root.name for c in clips if c not in labelled))
-        out += [(_sim_clip(c, players), k) for c in labelled]
+        sims = [_sim_clip(c, players) for c in labelled]
+        if not all(s.n_frames for s in sims):
+            log.warning("%s (%s): clip(s) without frames skipped (no n_frames in clip.yaml, no video, no ball.csv "
+                        "or events.csv row): %s", src.root, split, ", ".join(s.name for s in sims if not s.n_frames))
+        out += [(s, k) for s in sims if s.n_frames]
     return out
+
+
+def _frame_count(clip: Clip, ball: BallTrack, events) -> int:
+    """clip.yaml's ``n_frames``, else the video's frame count, else one past the last frame ball.csv or
+    events.csv names (0 when none does)."""
+    info = clip.info
+    if info.n_frames or (clip.root / info.video).exists():
+        return info.n_frames or clip.n_frames
+    return max([int(t.frame.max()) + 1 for t in (ball, events) if len(t)], default=0)
 
 
 def _sim_clip(clip: Clip, with_players: bool = False) -> SimClip:
     info = clip.info
     ball = clip.read_ball()
-    n = info.n_frames or (clip.n_frames if (clip.root / info.video).exists() else None)
-    n = n or (int(ball.frame[-1]) + 1 if len(ball) else 0)
     gt_events = clip.gt_dir / "events.csv"
     events = clip.read_events(gt=gt_events.is_file())
+    n = _frame_count(clip, ball, events)
     camera = None
     for gt in (True, False):
         try:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 import sys
 from importlib.metadata import EntryPoint
 from pathlib import Path
@@ -108,11 +109,13 @@ def test_round_trip_through_the_commands(rally3d, clip, tmp_path, suffix, capsys
     # and once more into the same folder: refused without --overwrite, backed up with it
     assert rally3d(["import", str(out), str(new)]) == 1
     assert "--overwrite" in capsys.readouterr().err
+    edited = (new / "ball.csv").read_text() + "\n"  # a hand edit since the first import
+    (new / "ball.csv").write_text(edited)
     assert rally3d(["import", str(out), str(new), "--overwrite"]) == 0
-    assert sorted(p.name.split(".csv")[0] for p in (new / ".rally3d" / "backup").iterdir()) == [
-        "ball",
-        "events",
-    ]
+    # the edited ball.csv is backed up; events.csv, identical to what is written, is left alone
+    [copy] = (new / ".rally3d" / "backup").iterdir()
+    assert copy.name.startswith("ball.csv.") and copy.read_text() == edited
+    assert str(copy) in capsys.readouterr().out
     _same_ball(clip.read_ball(), back.read_ball())
 
 
@@ -330,6 +333,250 @@ def test_labelstudio_picks_the_task_and_annotation(tmp_path):
     np.testing.assert_array_equal(got.ball.frame, [1])  # the cancelled annotation is skipped
 
 
+# ----------------------------------------------------------------- CVAT's own task and job export layouts
+# As CVAT's dataset manager writes them (cvat/apps/dataset_manager/bindings.py, TaskData.meta_for_task
+# and JobData._init_meta): a task export keeps <original_size> inside <task>; a job export puts it in
+# <meta> after </job> and <dumped>, gives the job's own start/stop frames and its segment of the task,
+# and numbers the shapes in video frames. Real tracks list every frame up to the closing outside shape
+# (keyframe="0" between keyframes).
+CVAT_TRACKS = """  <track id="0" label="ball" source="manual">
+    <points frame="{f0}" keyframe="1" outside="0" occluded="0" points="100.00,200.00" z_order="0">
+    </points>
+    <points frame="{f1}" keyframe="0" outside="0" occluded="0" points="110.00,210.00" z_order="0">
+    </points>
+    <points frame="{f2}" keyframe="1" outside="0" occluded="1" points="120.00,220.00" z_order="0">
+    </points>
+    <points frame="{f3}" keyframe="1" outside="1" occluded="0" points="120.00,220.00" z_order="0">
+    </points>
+  </track>
+  <track id="1" label="ground" source="manual">
+    <points frame="{f1}" keyframe="1" outside="0" occluded="0" points="110.00,210.00" z_order="0">
+    </points>
+    <points frame="{f2}" keyframe="1" outside="1" occluded="0" points="110.00,210.00" z_order="0">
+    </points>
+  </track>
+</annotations>
+"""
+CVAT_LABELS = """      <labels>
+        <label>
+          <name>ball</name>
+          <color>#fa3253</color>
+          <type>points</type>
+          <attributes>
+          </attributes>
+        </label>
+        <label>
+          <name>ground</name>
+          <color>#33ddff</color>
+          <type>points</type>
+          <attributes>
+          </attributes>
+        </label>
+      </labels>
+"""
+CVAT_TASK_EXPORT = """<?xml version="1.0" encoding="utf-8"?>
+<annotations>
+  <version>1.1</version>
+  <meta>
+    <task>
+      <id>7</id>
+      <name>rally 7</name>
+      <size>{size}</size>
+      <mode>interpolation</mode>
+      <overlap>5</overlap>
+      <bugtracker></bugtracker>
+      <created>2024-05-02 09:14:03.410870+00:00</created>
+      <updated>2024-05-02 10:01:45.102771+00:00</updated>
+      <subset>default</subset>
+      <start_frame>{start}</start_frame>
+      <stop_frame>{stop}</stop_frame>
+      <frame_filter>{filter}</frame_filter>
+      <segments>
+        <segment>
+          <id>9</id>
+          <start>0</start>
+          <stop>{last}</stop>
+          <url>http://localhost:8080/api/jobs/12</url>
+        </segment>
+      </segments>
+      <owner>
+        <username>anna</username>
+        <email>anna@example.com</email>
+      </owner>
+      <assignee></assignee>
+""" + CVAT_LABELS + """      <original_size>
+        <width>1280</width>
+        <height>720</height>
+      </original_size>
+      <source>rally_07.mp4</source>
+    </task>
+    <dumped>2024-05-02 10:02:11.512408+00:00</dumped>
+  </meta>
+"""
+CVAT_JOB_EXPORT = """<?xml version="1.0" encoding="utf-8"?>
+<annotations>
+  <version>1.1</version>
+  <meta>
+    <job>
+      <id>12</id>
+      <size>{size}</size>
+      <mode>interpolation</mode>
+      <overlap>5</overlap>
+      <bugtracker></bugtracker>
+      <created>2024-05-02 09:14:03.410870+00:00</created>
+      <updated>2024-05-02 10:01:45.102771+00:00</updated>
+      <subset>default</subset>
+      <start_frame>{start}</start_frame>
+      <stop_frame>{stop}</stop_frame>
+      <frame_filter>{filter}</frame_filter>
+      <segments>
+        <segment>
+          <id>9</id>
+          <start>{seg_start}</start>
+          <stop>{last}</stop>
+          <url>http://localhost:8080/api/jobs/12</url>
+        </segment>
+      </segments>
+      <owner>
+        <username>anna</username>
+        <email>anna@example.com</email>
+      </owner>
+      <assignee></assignee>
+""" + CVAT_LABELS + """    </job>
+    <dumped>2024-05-02 10:02:11.512408+00:00</dumped>
+    <original_size>
+      <width>1280</width>
+      <height>720</height>
+    </original_size>
+  </meta>
+"""
+
+
+@pytest.mark.parametrize("layout", ["task", "job"])
+def test_cvat_task_and_job_exports_import(rally3d, tmp_path, capsys, layout):
+    """A task export and a job export of a one-job task, as CVAT's web app writes them, import alike."""
+    template = CVAT_TASK_EXPORT if layout == "task" else CVAT_JOB_EXPORT
+    meta = template.format(size=30, start=0, stop=29, filter="", seg_start=0, last=29)
+    path = tmp_path / "annotations.xml"
+    path.write_text(meta + CVAT_TRACKS.format(f0=2, f1=3, f2=4, f3=5))
+    got = import_cvat(path)
+    np.testing.assert_array_equal(got.ball.frame, [2, 3, 4])
+    np.testing.assert_array_equal(got.ball.visibility, [1, 1, 3])
+    np.testing.assert_allclose(got.ball.to_pixels(1280, 720), [[100, 200], [110, 210], [120, 220]])
+    assert got.events == HitEvents([3], ["ground"])
+    assert (got.width, got.height) == (1280, 720)
+    # a job's <size> counts the job's frames, not the clip's: only a task states the clip's length
+    assert got.n_frames == (30 if layout == "task" else None)
+    assert ("CVAT task 'rally 7'" if layout == "task" else "CVAT job 12") in got.source
+    clip = tmp_path / "clip"
+    args = ["import", str(path), str(clip), "--sport", "padel", "--fps", "25"]
+    assert rally3d(args) == 0, capsys.readouterr()
+    np.testing.assert_array_equal(Clip(clip).read_ball().frame, [2, 3, 4])
+
+
+def test_cvat_job_of_a_longer_task_lands_on_task_frames(tmp_path):
+    """Job 2 of a task made with start frame 10 and step 2: the job covers task frames 15-29, i.e. video
+    frames 40-68; its shapes carry video frames, and the rows land on the task's (the clip's) frames."""
+    meta = CVAT_JOB_EXPORT.format(size=15, start=40, stop=68, filter="step=2", seg_start=15, last=29)
+    path = tmp_path / "annotations.xml"
+    path.write_text(meta + CVAT_TRACKS.format(f0=40, f1=42, f2=44, f3=46))
+    got = import_cvat(path)
+    np.testing.assert_array_equal(got.ball.frame, [15, 16, 17])
+    assert got.events == HitEvents([16], ["ground"])
+    assert any("video frame 10" in w and "step 2" in w for w in got.warnings)
+    path.write_text(meta + CVAT_TRACKS.format(f0=40, f1=42, f2=44, f3=72))  # the outside shape past the job
+    with pytest.raises(FormatError, match=r"line \d+: frame 72 lies past the job's frames \(task frames 15"):
+        import_cvat(path)
+
+
+def test_cvat_without_original_size_takes_width_and_height(rally3d, tmp_path, capsys):
+    """A task made from images states no <original_size>: the fix asks for --width/--height (not for the
+    export the user already made), and with them the file imports."""
+    meta = CVAT_TASK_EXPORT.format(size=30, start=0, stop=29, filter="", seg_start=0, last=29)
+    meta = meta.split("      <original_size>")[0] + "    </task>\n  </meta>\n"
+    path = tmp_path / "annotations.xml"
+    path.write_text(meta + CVAT_TRACKS.format(f0=2, f1=3, f2=4, f3=5))
+    clip = tmp_path / "clip"
+    assert rally3d(["import", str(path), str(clip), "--sport", "padel", "--fps", "25"]) == 1
+    err = capsys.readouterr().err
+    assert "<original_size>" in err and "--width" in err and "--height" in err
+    assert "export with" not in err
+    args = ["import", str(path), str(clip), "--sport", "padel", "--fps", "25"]
+    args += ["--width", "1280", "--height", "720"]
+    assert rally3d(args) == 0, capsys.readouterr().err
+    np.testing.assert_allclose(Clip(clip).read_ball().to_pixels(1280, 720)[0], [100, 200])
+    # into an existing clip, its clip.yaml gives the size
+    assert rally3d(["import", str(path), str(clip), "--overwrite"]) == 0, capsys.readouterr().err
+    np.testing.assert_allclose(Clip(clip).read_ball().to_pixels(1280, 720)[0], [100, 200])
+
+
+# ------------------------------------------------------------------------------- Label Studio's time
+def test_labelstudio_export_writes_time_as_frame_over_fps(tmp_path):
+    """Label Studio (its editor, converter and ML backend) writes a keyframe's time as frame / fps with
+    the 1-based frame; so does the export."""
+    from inference.interchange.labelstudio import export_labelstudio
+
+    clip = _awkward_clip(tmp_path / "c")
+    out = export_labelstudio(
+        tmp_path / "a.json", clip.read_ball(), clip.read_events(), width=1920, height=1080,
+        n_frames=60, fps=25.0,
+    )
+    result = json.loads(out.read_text())[0]["annotations"][0]["result"]
+    items = [k for r in result if r["type"] == "videorectangle" for k in r["value"]["sequence"]]
+    assert items and all(k["time"] == pytest.approx(k["frame"] / 25.0, abs=1e-6) for k in items)
+
+
+def _ls_own_task() -> dict:
+    """A task as Label Studio's editor saves it (its own test fixture's layout): frameRate 24 in the
+    config, time = frame / 24, framesCount and duration from the browser, no fps in the data."""
+    seq = [
+        {"frame": 1, "enabled": True, "rotation": 0, "x": 9.0, "y": 18.0, "width": 2.0, "height": 4.0,
+         "time": 1 / 24},
+        {"frame": 5, "enabled": False, "rotation": 0, "x": 13.0, "y": 22.0, "width": 2.0, "height": 4.0,
+         "time": 5 / 24},
+        {"frame": 9, "enabled": False, "rotation": 0, "x": 49.0, "y": 48.0, "width": 2.0, "height": 4.0,
+         "time": 9 / 24},
+    ]
+    region = {"id": "RRxnu061g3", "type": "videorectangle", "from_name": "box", "to_name": "video",
+              "origin": "manual",
+              "value": {"framesCount": 131, "duration": 5.425, "sequence": seq, "labels": ["ball"]}}
+    return {"id": 3, "data": {"video": "/data/upload/1/rally.mp4"},
+            "annotations": [{"id": 9, "was_cancelled": False, "result": [region]}]}
+
+
+def test_labelstudio_own_layout_round_trips(tmp_path):
+    """Label Studio's file -> clip rows -> rally3d's file: each keyframe comes back on the same frame at
+    the same time, and the rows read back the same."""
+    from inference.interchange.labelstudio import export_labelstudio
+
+    path = tmp_path / "ls.json"
+    task = _ls_own_task()
+    path.write_text(json.dumps([task]))
+    got = import_labelstudio(path)
+    assert not got.warnings
+    np.testing.assert_array_equal(got.ball.frame, np.arange(9))
+    np.testing.assert_array_equal(got.ball.visibility, [1, 1, 1, 1, 1, 0, 0, 0, 1])  # hidden after frame 5
+    out = export_labelstudio(tmp_path / "back.json", got.ball, got.events, width=1280, height=720,
+                             n_frames=131, fps=24.0)
+    region = json.loads(out.read_text())[0]["annotations"][0]["result"][0]
+    back = {k["frame"]: k for k in region["value"]["sequence"]}
+    for key in task["annotations"][0]["result"][0]["value"]["sequence"]:
+        assert back[key["frame"]]["time"] == pytest.approx(key["time"], abs=1e-6)
+    again = import_labelstudio(out)
+    _same_ball(got.ball, again.ball)
+
+
+def test_labelstudio_frame_rate_mismatch_is_reported(tmp_path):
+    """Keyframe times say Label Studio counted frames at 24 fps (time = frame / frameRate) while the task
+    states 30: its frame numbers drift from the video's, and the import says which setting to fix."""
+    task = _ls_own_task()
+    task["data"]["fps"] = 30
+    path = tmp_path / "ls.json"
+    path.write_text(json.dumps([task]))
+    warnings = import_labelstudio(path).warnings
+    assert any("24 fps" in w and "frameRate" in w and "result[0]" in w for w in warnings), warnings
+
+
 # ------------------------------------------------------------------------------------------ bad input
 BILLION_LAUGHS = """<?xml version="1.0"?>
 <!DOCTYPE lolz [<!ENTITY lol "lol"><!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">]>
@@ -384,6 +631,30 @@ BAD_CVAT = [
         ["CVAT for images", "CVAT for video 1.1"],
     ),
     ("no meta", "<annotations><version>1.1</version></annotations>", ["no <meta>"]),
+    (
+        "step 0",
+        CVAT_META.format(size=5, stop=4).replace("<frame_filter><", "<frame_filter>step=0<")
+        + POINT.format(f=1, p="1,1")
+        + "</annotations>",
+        ["line 7", "step=0", "step=1"],
+    ),
+    (
+        "size absurd",
+        CVAT_META.format(size=2_000_000_000, stop=4) + POINT.format(f=1, p="1,1") + "</annotations>",
+        ["line 6", "<size> 2000000000", "3456000"],
+    ),
+    (
+        "frame absurd",
+        CVAT_META.format(size=5, stop=4) + POINT.format(f=10**23, p="1,1") + "</annotations>",
+        ["line 12", "frame 100000000000000000000000", "5 frames"],
+    ),
+    (
+        "image absurd",
+        CVAT_META.format(size=5, stop=4).replace("<width>1280</width>", "<width>1000000000000</width>")
+        + POINT.format(f=1, p="1,1")
+        + "</annotations>",
+        ["line 9", "1000000000000", "--width"],
+    ),
 ]
 
 
@@ -420,6 +691,28 @@ BAD_LS = [
     ("occluded no box", [_ls_task([_timeline("occluded", [(4, 6)])])], ["frame 4", "has no ball box"]),
     ("backwards", [_ls_task([_timeline("ground", [(6, 4)])])], ["ranges[0]", "swap start and end"]),
     ("event box", [_ls_task([_box([_kf(1, 10, 10)], labels=("ground",))])], ["TimelineLabels"]),
+    (
+        "predictions not a list",
+        [{"id": 4, "data": {"video": "v.mp4"}, "annotations": [], "predictions": 1.5}],
+        ["task 4", "'predictions' is 1.5", "list"],
+    ),
+    (
+        "annotations not a list",
+        [{"id": 4, "data": {}, "annotations": 1.5}],
+        ["task 4", "'annotations' is 1.5"],
+    ),
+    (
+        "past framesCount",
+        [_ls_task([_box([_kf(51, 10, 10)])])],
+        ["sequence[0]", "frame 51", "framesCount 50"],
+    ),
+    (
+        "framesCount absurd",
+        [_ls_task([{**_box([_kf(1, 10, 10)]), "value": {**_box([])["value"], "framesCount": 2_000_000_000,
+                                                         "sequence": [_kf(1, 10, 10)]}}])],
+        ["result[0]", "framesCount 2000000000", "3456000"],
+    ),
+    ("data not a mapping", [_ls_task([], 1), {**_ls_task([], 2), "data": [1]}], ["2 tasks", "--task ID"]),
 ]
 
 
@@ -512,11 +805,24 @@ def test_import_checks_frames_against_the_video(rally3d, tmp_path, capsys):
     write_frames_folder(root / "frames", [np.zeros((36, 64, 3), np.uint8)] * 5)
     path = _cvat(tmp_path, POINT.format(f=7, p="640,360") + "\n", size=40)
     assert rally3d(["import", str(path), str(root)]) == 1
-    assert "ball on frame 7, but the clip has 5 frames" in capsys.readouterr().err
+    assert "line 12: frame 7 lies past the clip's 5 frames" in capsys.readouterr().err
     path = _cvat(tmp_path, POINT.format(f=4, p="640,360") + "\n", size=40)
     assert rally3d(["import", str(path), str(root)]) == 0
     assert "the file states 40 frames, the clip has 5" in capsys.readouterr().out
     np.testing.assert_array_equal(Clip(root).read_ball().frame, [4])
+
+
+def test_frames_are_bounded_by_the_existing_clip(rally3d, tmp_path, capsys):
+    """A file that states no length, into a 60-frame clip: frame 100000 is refused at its place, before
+    the frames between the keyframes are built."""
+    clip = _awkward_clip(tmp_path / "c")
+    region = {"type": "videorectangle", "value": {"labels": ["ball"], "sequence": [_kf(1, 10, 10),
+                                                                                    _kf(100_000, 20, 20)]}}
+    path = tmp_path / "export.json"
+    path.write_text(json.dumps([_ls_task([region])]))
+    assert rally3d(["import", str(path), str(clip.root), "--overwrite"]) == 1
+    err = capsys.readouterr().err
+    assert "result[0], sequence[1]: frame 100000 lies past the clip's 60 frames" in err and "fix:" in err
 
 
 def test_export_never_overwrites_without_backup(rally3d, tmp_path, capsys):
@@ -544,3 +850,63 @@ def test_help_reads_well(rally3d, cmd, capsys):
     out = capsys.readouterr().out
     for word in ("CVAT", "Label Studio", "docs/interchange.md", "examples:"):
         assert word in out
+
+
+# ---------------------------------------------------------------------- bounds before any allocation
+DRIVER = """
+import sys
+from importlib.metadata import EntryPoint
+import inference.cli as cli
+eps = [EntryPoint(n, f"inference.interchange.cli:register_{n}", cli.GROUP) for n in ("import", "export")]
+cli.entry_points = lambda group: eps if group == cli.GROUP else []
+sys.exit(cli.main(sys.argv[1:]))
+"""
+ADDRESS_SPACE = 1 << 30
+"""The capped `rally3d import` may map 1 GiB (it needs ~150 MB); the unbounded code grew past 3.5 GB."""
+
+
+def _absurd_files(tmp_path: Path) -> dict[str, Path]:
+    """Small files that address billions of frames: one shape at frame 1e23, a 2e9-frame task, a keyframe
+    and a timeline range at frame 2e9 (with and without framesCount)."""
+    key = '<points frame="{f}" keyframe="1" outside="0" occluded="0" points="1,1"/>'
+    track = '<track id="0" label="ball">' + key.format(f=0) + key.format(f="{f}") + "</track></annotations>"
+    no_size = CVAT_META.replace("<size>{size}</size>", "")
+    files = {
+        "cvat frame 1e23": no_size.format(stop=4) + track.format(f=10**23),
+        "cvat frame 1e23 in 30": CVAT_META.format(size=30, stop=29) + track.format(f=10**23),
+        "cvat size 2e9": CVAT_META.format(size=2 * 10**9, stop=2 * 10**9 - 1) + track.format(f=2 * 10**9 - 1),
+        "ls frame 2e9": json.dumps([_ls_task([_box([_kf(1, 10, 10), _kf(2 * 10**9, 20, 20)])])]),
+        "ls frame 2e9 no count": json.dumps(
+            [_ls_task([{"type": "videorectangle", "value": {"labels": ["ball"], "sequence": [
+                _kf(1, 10, 10), _kf(2 * 10**9, 20, 20)]}}])]),
+        "ls range 2e9": json.dumps([_ls_task([_timeline("out_of_frame", [(1, 2 * 10**9)])])]),
+    }
+    paths = {}
+    for name, text in files.items():
+        paths[name] = tmp_path / (name.replace(" ", "_") + (".xml" if name.startswith("cvat") else ".json"))
+        paths[name].write_text(text)
+    return paths
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["cvat frame 1e23", "cvat frame 1e23 in 30", "cvat size 2e9", "ls frame 2e9", "ls frame 2e9 no count",
+     "ls range 2e9"],
+)
+def test_absurd_frame_numbers_are_refused_before_allocating(tmp_path, name):
+    """`rally3d import` of a file addressing billions of frames: a clear error within a 1 GiB address
+    space (the unbounded code filled it and died with a MemoryError traceback)."""
+    resource = pytest.importorskip("resource")
+    path = _absurd_files(tmp_path)[name]
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE, ADDRESS_SPACE))
+
+    args = ["import", str(path), str(tmp_path / "clip"), "--sport", "padel", "--fps", "25",
+            "--width", "1280", "--height", "720"]
+    done = subprocess.run([sys.executable, "-c", DRIVER, *args], cwd=REPO, capture_output=True, text=True,
+                          preexec_fn=cap, timeout=600)
+    assert done.returncode == 1, done.stderr[-2000:]
+    assert "Traceback" not in done.stderr and "MemoryError" not in done.stderr, done.stderr[-2000:]
+    assert str(path) in done.stderr and "fix:" in done.stderr and "frame" in done.stderr
+    assert not (tmp_path / "clip").exists()
