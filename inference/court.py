@@ -326,6 +326,10 @@ def load_court(name_or_path: str | Path) -> Court:
         hits = HitLimits(**(data.get("hits") or {}))
         groups = {str(k): tuple(str(x) for x in v) for k, v in (data.get("event_groups") or {}).items()}
         size = np.asarray(data.get("size", [0, 0]), dtype=float)
+        if data.get("player_area") is not None:  # rectangles x0, x1, y0, y1 (inference.players.tracking)
+            area = np.asarray(data["player_area"], dtype=float).reshape(-1, 4)
+            if not np.isfinite(area).all() or (area[:, 1] <= area[:, 0]).any() or (area[:, 3] <= area[:, 2]).any():
+                raise ValueError("player_area must be [[x0, x1, y0, y1], ...] with x0 < x1 and y0 < y1")
         return Court(
             name=str(data["name"]),
             sport=str(data.get("sport", data["name"])),

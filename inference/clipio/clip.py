@@ -124,9 +124,10 @@ class Clip:
 
     def frames(self, *, cache_size: int = 8) -> FrameSource:
         """The clip's frames (lazy; close it or use ``with``)."""
-        from .frames import FrameSource  # here: OpenCV loads only when frames are read
+        from .frames import FrameSource, clip_repeats  # here: OpenCV loads only when frames are read
 
-        return FrameSource.open(self.video_path, fps=self.info.fps, cache_size=cache_size)
+        return FrameSource.open(self.video_path, fps=self.info.fps, cache_size=cache_size,
+                                repeats=clip_repeats(self.info))
 
     @cached_property
     def n_frames(self) -> int:

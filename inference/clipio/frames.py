@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from .errors import FormatError
-from .probe import COMB_THRESHOLD, Resampling, comb_score, deinterlace, probe_video_file
+from .probe import COMB_THRESHOLD, PictureRepeats, Resampling, comb_score, deinterlace, probe_video_file
 
 log = logging.getLogger(__name__)
 
@@ -58,20 +58,24 @@ class FrameSource(ABC):
         self._cache_size = cache_size
 
     @staticmethod
-    def open(path: str | Path, *, fps: float | None = None, cache_size: int = 8) -> FrameSource:
+    def open(path: str | Path, *, fps: float | None = None, cache_size: int = 8,
+             repeats: PictureRepeats | None = None) -> FrameSource:
         """Open a clip folder (its ``clip.yaml`` names the frames), a video file, or a frames folder.
 
         Args:
             path: clip folder, video file or frames folder.
             fps: overrides the frame rate (a clip folder's ``clip.yaml`` gives it otherwise).
             cache_size: number of recently read frames kept in memory.
+            repeats: a video whose every n-th frame repeats a picture: read without the repeats (a clip
+                folder's ``clip.yaml`` says so in ``timing.repeated_pictures``).
         """
         path = Path(path)
         if path.is_dir() and (path / "clip.yaml").is_file():
             from .clip_yaml import read_clip_yaml
 
             info = read_clip_yaml(path / "clip.yaml")
-            return FrameSource.open(path / info.video, fps=fps or info.fps, cache_size=cache_size)
+            return FrameSource.open(path / info.video, fps=fps or info.fps, cache_size=cache_size,
+                                    repeats=repeats or clip_repeats(info))
         if path.is_dir():
             return FolderFrames(path, fps=fps, cache_size=cache_size)
         if not path.exists():
@@ -80,7 +84,7 @@ class FrameSource(ABC):
                 "video file not found",
                 fix="check the path, or clip.yaml's 'video' key (a file like video.mp4 or frames/)",
             )
-        return VideoFrames(path, fps=fps, cache_size=cache_size)
+        return VideoFrames(path, fps=fps, cache_size=cache_size, repeats=repeats)
 
     # --------------------------------------------------------------------------------------- access
     @abstractmethod
@@ -147,6 +151,14 @@ class FrameSource(ABC):
         """Decode frames ``start .. stop-1`` sequentially."""
 
 
+def clip_repeats(info) -> PictureRepeats | None:
+    """The repeated pictures that a clip's ``clip.yaml`` (:class:`~.clip_yaml.ClipInfo`) records in
+    ``timing.repeated_pictures`` (None when it records none)."""
+    timing = info.extra.get("timing") if isinstance(info.extra, dict) else None
+    rec = timing.get("repeated_pictures") if isinstance(timing, dict) else None
+    return PictureRepeats.from_record(rec) if rec else None
+
+
 # -------------------------------------------------------------------------------------------- video
 class VideoFrames(FrameSource):
     """Frames of a video file, decoded with OpenCV, presented at one constant rate and progressive.
@@ -157,7 +169,8 @@ class VideoFrames(FrameSource):
     done (also logged, level INFO).
     """
 
-    def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
+    def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8,
+                 repeats: PictureRepeats | None = None):
         super().__init__(cache_size)
         self.path = Path(path)
         self._cap: cv2.VideoCapture | None = None
@@ -179,6 +192,10 @@ class VideoFrames(FrameSource):
             self.resampling = self.probe.resampling(self.fps)
             self._map = self.resampling.source
             self.notes.append(self.resampling.note())
+        elif repeats is not None:  # a lower-rate content in a higher-rate file: the repeated pictures left out
+            self.fps = fps or repeats.content_fps
+            self._map = repeats.keep(self.probe.n_frames if self.probe is not None else self._n)
+            self.notes.append(repeats.note(self.path.name))
         first = self._read_next(0)
         if self._n <= 0:
             self._n = self._count_frames()
@@ -355,7 +372,8 @@ class _PyAVCapture:
 class FolderFrames(FrameSource):
     """Frames stored as images ``000000.jpg, 000001.jpg, ...`` (zero-based, no gaps)."""
 
-    def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8):
+    def __init__(self, path: str | Path, *, fps: float | None = None, cache_size: int = 8,
+                 repeats: PictureRepeats | None = None):
         super().__init__(cache_size)
         self.path = Path(path)
         self.fps = fps

@@ -12,6 +12,10 @@ one constant rate (``i / fps`` is the time of frame ``i``), progressive.
   the source frame whose timestamp is nearest to ``t0 + i / fps`` (a gap repeats a frame, a burst drops
   frames), as ``ffmpeg -vsync cfr`` does. :class:`Resampling` says which.
 * interlaced → deinterlaced by :func:`deinterlace` (the first field is kept, the other interpolated).
+* **repeated pictures** on a regular beat (a 25 fps broadcast converted to a 30 fps file repeats every 6th
+  picture; the timestamps are regular, the motion is not) → read at the content's rate, the repeats left out
+  (:func:`find_picture_repeats`, :class:`PictureRepeats`): at 30 fps a ball seems to stop for a frame every
+  0.2 s and to move 20 % faster in between, which no flight fits.
 
 Example:
     >>> p = probe_video_file("match.mkv")
@@ -270,6 +274,123 @@ def probe_video_file(path: str | Path) -> VideoProbe | None:
         return None
     p = _probe_cached(str(path.resolve()), st.st_size, st.st_mtime_ns)
     return p if p is not None and p.n_frames > 0 else None
+
+
+# ------------------------------------------------------------------------------------ repeated pictures
+#: a frame whose difference from the one before is below this share of the median difference repeats it
+REPEAT_SHARE = 0.2
+#: frames decoded (at low resolution) to look for repeated pictures
+REPEAT_SCAN = 360
+
+
+@dataclass(frozen=True)
+class PictureRepeats:
+    """Content at a lower rate in a higher-rate file: every ``period``-th frame (from ``phase``) repeats the
+    picture before it (25 fps in 30 fps: period 6; 24 in 30: 5; 25 in 50: 2).
+
+    Attributes:
+        period: frames per beat; phase: the first repeated frame (a file frame index, ≥ 1).
+        file_fps: the file's rate. found: repeats seen in the frames scanned; scanned: frames scanned.
+    """
+
+    period: int
+    phase: int
+    file_fps: float
+    found: int = 0
+    scanned: int = 0
+
+    def __post_init__(self) -> None:
+        if not (2 <= int(self.period) <= 60) or not (1 <= int(self.phase)) or not self.file_fps > 0:
+            raise ValueError(f"picture repeats need period 2-60, phase >= 1 and a positive rate, got {self}")
+
+    @property
+    def content_fps(self) -> float:
+        """The rate of the pictures (the file's rate less the repeats)."""
+        return self.file_fps * (self.period - 1) / self.period
+
+    def keep(self, n: int) -> np.ndarray:
+        """(K,) the file's frames that show a new picture, of its first ``n``."""
+        i = np.arange(n)
+        return i[(i < self.phase) | ((i - self.phase) % self.period != 0)]
+
+    def record(self) -> dict:
+        """clip.yaml's ``timing.repeated_pictures``."""
+        return {"period": int(self.period), "phase": int(self.phase), "file_fps": round(float(self.file_fps), 4),
+                "content_fps": round(float(self.content_fps), 4)}
+
+    @classmethod
+    def from_record(cls, d) -> PictureRepeats | None:
+        """From clip.yaml's ``timing.repeated_pictures`` (None when absent or malformed)."""
+        try:
+            return cls(int(d["period"]), int(d["phase"]), float(d["file_fps"]))
+        except (KeyError, TypeError, ValueError):
+            return None
+
+    def note(self, name: str) -> str:
+        return (f"{name}: every {self.period}th frame repeats the picture before it ({self.found} of "
+                f"{self.scanned} frames scanned, from frame {self.phase}): {self.content_fps:g} fps content in "
+                f"a {self.file_fps:g} fps file, read at {self.content_fps:g} fps with the repeats left out")
+
+
+def repeat_pattern(diffs: np.ndarray, fps: float) -> tuple[int, int, int] | None:
+    """``(period, phase, repeats found)`` of the frames that repeat the one before on a regular beat, from the
+    (N-1,) mean absolute differences of consecutive frames (``diffs[i]``: frame i+1 against frame i); None
+    when there is no such beat (a still shot, irregular repeats) or the content rate it gives is no
+    standard rate."""
+    d = np.asarray(diffs, float)
+    moving = d[d > 0]
+    if len(d) < 12 or not len(moving):
+        return None
+    typical = float(np.median(d))
+    if typical < 0.05:  # a still picture: nothing to tell a repeat by
+        return None
+    rep = np.flatnonzero(d < REPEAT_SHARE * typical) + 1
+    if len(rep) < 4 or len(rep) > 0.55 * len(d):
+        return None
+    gaps = np.diff(rep)
+    period = int(np.bincount(gaps).argmax()) if len(gaps) else 0
+    if not 2 <= period <= 12 or np.mean(gaps % period == 0) < 0.8 or np.mean(gaps == period) < 0.5:
+        return None
+    phases = np.bincount(rep % period, minlength=period)
+    phase_mod = int(phases.argmax())
+    if phases[phase_mod] < 0.8 * len(rep):
+        return None
+    expected = np.arange(phase_mod if phase_mod else period, len(d) + 1, period)
+    if np.mean(np.isin(expected, rep)) < 0.6:  # most beats of the scan repeat (not a few still moments)
+        return None
+    if standard_rate(fps * (period - 1) / period, 0.01) is None:
+        return None
+    return period, int(rep[np.isin(rep % period, phase_mod)][0] % period or period), int(len(rep))
+
+
+def find_picture_repeats(path: str | Path, fps: float | None = None, scan: int = REPEAT_SCAN
+                         ) -> PictureRepeats | None:
+    """Decode the first ``scan`` frames of a video at low resolution and find a regular beat of repeated
+    pictures (:func:`repeat_pattern`); None when there is none. About 1 s per 360 frames of 1080p."""
+    import cv2
+
+    cap = cv2.VideoCapture(str(path))
+    try:
+        fps = fps or cap.get(cv2.CAP_PROP_FPS) or None
+        diffs, prev = [], None
+        for _ in range(scan):
+            ok, bgr = cap.read()
+            if not ok or bgr is None:
+                break
+            g = cv2.cvtColor(cv2.resize(bgr, (160, 90), interpolation=cv2.INTER_AREA), cv2.COLOR_BGR2GRAY)
+            g = g.astype(np.float32)
+            if prev is not None:
+                diffs.append(float(np.abs(g - prev).mean()))
+            prev = g
+    finally:
+        cap.release()
+    if not fps:
+        return None
+    found = repeat_pattern(np.array(diffs), float(fps))
+    if found is None:
+        return None
+    period, phase, n = found
+    return PictureRepeats(period, phase, float(fps), n, len(diffs) + 1)
 
 
 # ------------------------------------------------------------------------------------------ interlace

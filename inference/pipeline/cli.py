@@ -142,7 +142,7 @@ def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> i
         clip = request_auto_mask(clip)
     print(f"rally3d infer: {source} → {clip.root} ({clip.info.width}×{clip.info.height}, {clip.info.fps:g} fps, "
           f"{clip.n_frames} frames)")
-    for note in video_notes(source if source.is_file() else clip.video_path):
+    for note in video_notes(clip.root if "cut" not in clip.info.extra else source):
         print(f"rally3d infer: note: {note}")
     only = set(args.only.split(",")) if args.only else None
     report = run_pipeline(clip, cfg, only=only)

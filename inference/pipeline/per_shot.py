@@ -113,7 +113,8 @@ def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frame
             continue
         sub = Observations(obs.court, obs.camera, obs.fps, obs.uv[a:b], obs.event_frames[m] - a,
                            [lab for lab, k in zip(obs.event_labels, m) if k],
-                           shot_rows(obs.players, a, b) if obs.players is not None else None, obs.source)
+                           shot_rows(obs.players, a, b) if obs.players is not None else None, obs.source,
+                           obs.pixel_sigma)
         fit = reconstruct(sub, method)
         for s in fit.segments:
             seg = dataclasses.replace(s.segment, index=s.segment.index + first, start=s.segment.start + a,
@@ -137,15 +138,16 @@ def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frame
     out = RallyFit(method, obs.fps, segs, seconds, cpu_seconds=cpu,
                    extra={"shots": shots, **({"iterations": iterations} if iterations else {}),
                           **({"refits": refits} if refits else {})})
-    out.extra["plausibility"] = summary(out, obs, _rms_limit(method))
+    out.extra["plausibility"] = summary(out, obs, _rms_limit(method, obs))
     return out
 
 
-def _rms_limit(method: str) -> float | None:
-    """The RMS (px) above which the method fails a flight (the joint fit's), for the clip's plausibility."""
+def _rms_limit(method: str, obs) -> float | None:
+    """The RMS (px) above which the method fails a flight (the joint fit's, with the clip's measured 2D
+    noise), for the clip's plausibility."""
     if method != "joint":
         return None
     from inference.reconstruct.joint import JointConfig
 
     cfg = JointConfig()
-    return cfg.rms_fail_factor * cfg.pixel_sigma
+    return cfg.rms_fail_factor * max(cfg.pixel_sigma, obs.pixel_sigma or 0.0)

@@ -75,6 +75,30 @@ def video_timing(path: Path, fps: float, first: int = 0, stop: int | None = None
     return probe.resampling(fps).record(first, stop)
 
 
+def picture_repeats(path: Path, fps: float):
+    """The regular beat of repeated pictures of a video at a constant rate
+    (:func:`~inference.clipio.probe.find_picture_repeats`; a 25 fps broadcast in a 30 fps file), or None."""
+    from inference.clipio.probe import find_picture_repeats, probe_video_file
+
+    probe = probe_video_file(path)
+    if probe is not None and probe.vfr:
+        return None  # resampled by its timestamps instead
+    return find_picture_repeats(path, fps)
+
+
+def _content(path: Path) -> tuple[int, int, float, int, dict | None, object]:
+    """(width, height, fps, n_frames, clip.yaml's ``timing`` or None, the repeats or None) of a video as a
+    clip reads it: at its nominal rate, the repeated pictures of a converted broadcast left out."""
+    width, height, fps, n = probe_video(path)
+    repeats = picture_repeats(path, fps)
+    if repeats is not None:
+        from inference.clipio.frames import FrameSource
+
+        with FrameSource.open(path, cache_size=0, repeats=repeats) as src:
+            return width, height, float(src.fps), len(src), {"repeated_pictures": repeats.record()}, repeats
+    return width, height, fps, n, video_timing(path, fps), None
+
+
 def video_notes(path: Path) -> list[str]:
     """What the reader does to present ``path`` (a video file or clip folder) at a constant rate,
     progressive: variable frame rate resampled, interlacing removed ([] when nothing, or not a video)."""
@@ -106,7 +130,8 @@ def prepare(source: Path, out: Path | None, court: str | None, camera: Path | No
         if out is None or Path(out).resolve() == source.resolve():
             clip, reference = src_clip, None
         else:
-            clip = _new_clip(Path(out), info, src_clip.video_path)
+            timing = info.extra.get("timing")  # how the video is read (its rate, repeated pictures) goes along
+            clip = _new_clip(Path(out), info, src_clip.video_path, {"timing": timing} if timing else None)
             for name in ("court_points.csv", "camera.yaml"):
                 if (source / name).is_file() and not (clip.root / name).exists():
                     shutil.copy2(source / name, clip.root / name)
@@ -114,13 +139,12 @@ def prepare(source: Path, out: Path | None, court: str | None, camera: Path | No
     elif source.suffix.lower() in VIDEO_SUFFIXES or source.is_file():
         if not court:
             raise ValueError(f"{source}: a video needs --court (padel or tennis, or a court YAML path)")
-        width, height, fps, n = probe_video(source)
+        width, height, fps, n, timing, _ = _content(source)
         out = Path(out) if out is not None else Path("runs/infer") / source.stem
         info = ClipInfo(sport=Path(court).stem if court.endswith(".yaml") else court, fps=fps, width=width,
                         height=height, video="video.mp4", n_frames=n, source=str(source))
         if court.endswith(".yaml"):
             info.court = os.path.relpath(Path(court).resolve(), out.resolve())
-        timing = video_timing(source, fps)
         clip, reference = _new_clip(out, info, source, {"timing": timing} if timing else None), None
     else:
         raise FileNotFoundError(f"{source}: neither a video file nor a clip folder (with clip.yaml)")
@@ -140,14 +164,15 @@ def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path
         video = source
     if not court:
         raise ValueError(f"{source}: a video needs --court (padel or tennis, or a court YAML path)")
-    width, height, fps, n = probe_video(video)
+    width, height, fps, n, _, repeats = _content(video)
     first, stop = cut.frames(fps, n)
     tag = f"_{first}-{stop}"
     out = Path(out) if out is not None else Path("runs/infer") / (Path(video).stem + tag)
     if is_clip_folder(source) and out.resolve() == source.resolve():
         raise ValueError(f"{source}: --start/--end write a new clip folder; pass --out elsewhere")
     record = {"video": os.path.relpath(Path(video).resolve(), out.resolve()), "start_s": cut.start_s,
-              "end_s": cut.end_s, "first_frame": first, "stop_frame": stop}
+              "end_s": cut.end_s, "first_frame": first, "stop_frame": stop,
+              **({"repeated_pictures_left_out": repeats.record()} if repeats is not None else {})}
     clip_yaml = out / "clip.yaml"
     if clip_yaml.is_file() and Clip(out).info.extra.get("cut") == record and (out / "video.mp4").is_file():
         clip = Clip(out)  # the same cut as before: resume
@@ -157,9 +182,9 @@ def _prepare_cut(source: Path, out: Path | None, court: str | None, camera: Path
         out.mkdir(parents=True, exist_ok=True)
         from inference.clipio.frames import FrameSource
 
-        with FrameSource.open(video, cache_size=0) as src:
+        with FrameSource.open(video, cache_size=0, repeats=repeats) as src:  # the repeats left out
             written = write_video(out / "video.mp4", src.iter(first, stop), fps, fourcc="h264", crf=18)
-        timing = video_timing(video, fps, first, stop)
+        timing = None if repeats is not None else video_timing(video, fps, first, stop)
         info = ClipInfo(sport=Path(court).stem if court.endswith(".yaml") else court, fps=fps, width=width,
                         height=height, video="video.mp4", n_frames=written,
                         source=f"{video} from {first / fps:.2f} s (frame {first})",

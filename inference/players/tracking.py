@@ -43,7 +43,9 @@ class TrackingConfig:
     max_speed: float = 8.0            # ... if a player could run between them (m/s)
     max_gap_s: float = 0.6            # gaps filled by interpolation
     smooth_s: float = 0.2             # court positions: centred moving average over this window
-    court_margin: float = 1.5         # m beyond the court's lines that still count as "on court"
+    court_margin: float = 1.5         # m beyond the court's lines, for a court YAML without `player_area`
+    static_m: float = 0.8             # a track whose positions spread less (m, 10-90 % range) stands still ...
+    static_weight: float = 0.1        # ... (a line judge, a ball kid, the umpire): its score is scaled by this
     distance_weight: float = 0.3      # selection score = seconds on court + weight × metres travelled
     ankle_height: float = ANKLE_HEIGHT
     min_kp_score: float = 0.3
@@ -157,20 +159,46 @@ def _first_position(t: Track) -> np.ndarray:
     return t.court[ok[0]] if len(ok) else np.full(2, np.nan)
 
 
+def player_area(court: Court, margin: float = 1.5) -> np.ndarray:
+    """``(K, 4)`` rectangles ``x0, x1, y0, y1`` (court metres) where the sport's players play: the court YAML's
+    ``player_area`` (tennis: up to 8 m behind the baselines and 5 m outside the doubles lines; padel: inside
+    the glass, and out through the side doors near the net), else the court's lines extended by ``margin``."""
+    rects = court.extra.get("player_area")
+    if rects is None:
+        sx, sy = court.size
+        return np.array([[-margin, sx + margin, -margin, sy + margin]], float)
+    out = np.asarray(rects, float).reshape(-1, 4)
+    if not np.isfinite(out).all() or (out[:, 1] <= out[:, 0]).any() or (out[:, 3] <= out[:, 2]).any():
+        raise ValueError(f"{court.source}: player_area must be [[x0, x1, y0, y1], ...] with x0 < x1, y0 < y1")
+    return out
+
+
 def on_court(court_xy: np.ndarray, court: Court, margin: float) -> np.ndarray:
-    """(T, 2) positions → (T,) inside the court's lines extended by ``margin`` metres."""
-    sx, sy = court.size
-    x, y = court_xy[:, 0], court_xy[:, 1]
+    """(T, 2) positions → (T,) inside the sport's playing area (:func:`player_area`)."""
+    x, y = court_xy[:, 0:1], court_xy[:, 1:2]
+    r = player_area(court, margin)
     with np.errstate(invalid="ignore"):
-        return (x >= -margin) & (x <= sx + margin) & (y >= -margin) & (y <= sy + margin)
+        return ((x >= r[:, 0]) & (x <= r[:, 1]) & (y >= r[:, 2]) & (y <= r[:, 3])).any(axis=1)
+
+
+def spread_m(t: Track) -> float:
+    """How far a track moves: the larger 10-90 % range of its court x and y (m; 0 without positions)."""
+    p = t.court[np.isfinite(t.court).all(axis=1)]
+    if len(p) < 2:
+        return 0.0
+    lo, hi = np.percentile(p, [10, 90], axis=0)
+    return float(np.max(hi - lo))
 
 
 def selection_score(t: Track, court: Court, fps: float, cfg: TrackingConfig) -> float:
-    """Seconds on court + weight × metres travelled on court (the thesis's player selection)."""
+    """Seconds in the playing area + weight × metres travelled there (the thesis's player selection),
+    scaled down for a person who stands still (:attr:`TrackingConfig.static_m`): beside a tennis court
+    line judges, ball kids and the umpire stand inside the area players use."""
     inside = on_court(t.court, court, cfg.court_margin)
     pts = t.court[inside]
     dist = float(np.nansum(np.linalg.norm(np.diff(pts, axis=0), axis=1))) if len(pts) > 1 else 0.0
-    return inside.sum() / fps + cfg.distance_weight * dist
+    score = inside.sum() / fps + cfg.distance_weight * dist
+    return score * (cfg.static_weight if spread_m(t) < cfg.static_m else 1.0)
 
 
 def select_players(tracks: list[Track], court: Court, fps: float, cfg: TrackingConfig) -> list[Track]:

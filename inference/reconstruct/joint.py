@@ -386,6 +386,8 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
               model: FlightModel | None = None) -> RallyFit:
     """Reconstruct the whole rally jointly (the default method; see the module docstring)."""
     cfg = config or JointConfig()
+    if obs.pixel_sigma is not None and obs.pixel_sigma > cfg.pixel_sigma:  # the clip's measured 2D noise
+        cfg = replace(cfg, pixel_sigma=float(obs.pixel_sigma))
     t0, c0 = time.perf_counter(), time.process_time()
     model = model or FlightModel.from_ball(obs.court.ball)
     hit_prior = HitPrior.from_court(obs.court)
@@ -530,6 +532,15 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             continue
         seen = np.isfinite(obs.uv[seg_frames]).all(axis=1)
         err = np.linalg.norm(obs.camera.project(xyz[m][seen]) - obs.uv[seg_frames[seen]], axis=1)
+        short = _too_short(seg_frames, int(seen.sum()), hi - lo + 1 if 0 <= seg.index < E - 1 else 0)
+        if short:
+            out.append(SegmentFit.failed(seg, short))
+            continue
+        rms = float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")
+        if rms > cfg.rms_fail_factor * cfg.pixel_sigma:  # never written as reconstructed, whatever the chain said
+            out.append(SegmentFit.failed(seg, f"reprojection RMS {rms:.1f} px over its frames > "
+                                              f"{cfg.rms_fail_factor:g} × the 2D noise ({cfg.pixel_sigma:.2g} px)"))
+            continue
         a = by_event.get(seg.index) if seg.index >= 0 else None
         b = by_event.get(seg.index + 1) if seg.index + 1 < E else None
 
@@ -553,8 +564,7 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             velocity=theta[start_flight.vel].copy(),
             spin=theta[start_flight.spin].copy() if start_flight.spin is not None else np.zeros(3),
             drag_k=pb.model.drag_k * (theta[start_flight.drag] if start_flight.drag is not None else 1.0),
-            reproj_rms_px=float(np.sqrt(np.mean(err**2))) if len(err) else float("nan"),
-            n_observed=int(seen.sum()))
+            reproj_rms_px=rms, n_observed=int(seen.sum()))
         if flags:
             sf.figures["flags"] = flags
         if notes:
@@ -564,6 +574,17 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             sf.figures["dropped_frames"] = f"{span} of a failing neighbour left out ({why})"
         out.append(sf)
     return out, em
+
+
+def _too_short(frames: np.ndarray, n_seen: int, span: int) -> str:
+    """Why a reported flight covering ``frames`` (with ``n_seen`` 2D points) is too little to report ("" when
+    it is not): fewer than 2 frames (a zero-length flight), or, for a flight between two events ``span``
+    frames apart, a fit covering less than half of it with fewer than 2 points (the rest cut off by a refit)."""
+    if len(frames) < 2:
+        return f"covers {len(frames)} frame{'' if len(frames) == 1 else 's'} only (nothing to reconstruct)"
+    if n_seen < 2 and span and len(frames) < 0.5 * span:
+        return f"the fit covers frames {frames[0]}–{frames[-1]} only, with {n_seen} 2D point(s)"
+    return ""
 
 
 def is_hit(label: str | None) -> bool:

@@ -44,6 +44,8 @@ class Observations:
         events: (E,) frames and (E,) labels, sorted by frame.
         players: player tracks (court positions) or None.
         source: where it came from (for messages).
+        pixel_sigma: the 2D noise of ``uv`` (px) when measured (:func:`clip_pixel_sigma`); None: the fit's
+            default.
     """
 
     court: Court
@@ -54,6 +56,7 @@ class Observations:
     event_labels: list[str]
     players: PlayerTracks | None = None
     source: str = ""
+    pixel_sigma: float | None = None
 
     def __post_init__(self) -> None:
         self.uv = np.asarray(self.uv, dtype=float).reshape(-1, 2)
@@ -91,18 +94,63 @@ class Observations:
         except FormatError as err:
             warnings.warn(f"{err}; reconstructing without players' positions", stacklevel=2)
             players = None
-        return cls.from_tables(court, camera, clip.info.fps, clip.read_ball(), clip.read_events(), clip.n_frames,
-                               players if players is not None and len(players) else None, str(clip.root))
+        obs = cls.from_tables(court, camera, clip.info.fps, clip.read_ball(), clip.read_events(), clip.n_frames,
+                              players if players is not None and len(players) else None, str(clip.root))
+        return replace(obs, pixel_sigma=clip_pixel_sigma(clip, obs.uv))
 
     def with_track(self, uv: np.ndarray) -> Observations:
         """The same rally with other 2D positions (e.g. noisy or detected)."""
         return Observations(self.court, self.camera, self.fps, uv, self.event_frames, list(self.event_labels),
-                            self.players, self.source)
+                            self.players, self.source, self.pixel_sigma)
 
     def segments(self) -> list[Segment]:
         """The flights between consecutive events (E-1 segments)."""
         f, lab = self.event_frames, self.event_labels
         return [Segment(i, int(f[i]), int(f[i + 1]), lab[i], lab[i + 1]) for i in range(len(f) - 1)]
+
+
+#: the 2D noise assumed at 720 lines (px); larger frames scale it (a detector sees a fixed input size)
+PIXEL_SIGMA_720 = 2.0
+
+
+def track_noise_px(uv: np.ndarray, half: int = 3) -> float | None:
+    """The 2D noise (px) of a ball track ``uv`` (F, 2), NaN where missing: the robust spread (MAD) of each
+    frame's distance from a quadratic through its ``2·half + 1`` neighbours, over every full window (a flight
+    is smooth over a few frames; contacts are few and the median ignores them). None with fewer than 10
+    windows."""
+    uv = np.asarray(uv, float)
+    t = np.arange(-half, half + 1, dtype=float)
+    A = np.stack([np.ones_like(t), t, t * t], 1)
+    H = A @ np.linalg.pinv(A)
+    full = np.convolve(np.isfinite(uv).all(axis=1).astype(int), np.ones(2 * half + 1, int), "valid") == 2 * half + 1
+    starts = np.flatnonzero(full)
+    if len(starts) < 10:
+        return None
+    win = np.stack([uv[s:s + 2 * half + 1] for s in starts])           # (W, 2h+1, 2)
+    r = (win - np.einsum("ij,wjk->wik", H, win))[:, half] / np.sqrt(1.0 - H[half, half])
+    mad = 1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+    return float(np.sqrt(np.mean(mad**2)))
+
+
+def clip_pixel_sigma(clip: Clip, uv: np.ndarray) -> float:
+    """The 2D noise (px) the fit assumes for a clip: :data:`PIXEL_SIGMA_720` scaled to its frame height, or
+    the noise measured on its track when larger (the detector's raw track, ``.rally3d/ball_detected.csv``,
+    when the pipeline kept it: ball.csv is smoothed). On real 1080p broadcasts the detector's noise is
+    3–5 px, which a fixed 2 px would call a failed flight."""
+    floor = PIXEL_SIGMA_720 * clip.info.height / 720.0
+    raw = clip.root / ".rally3d" / "ball_detected.csv"
+    if raw.is_file():
+        try:
+            from inference.clipio import read_ball_csv
+
+            t = read_ball_csv(raw)
+            keep = (t.visibility == 1) & (t.frame < len(uv))  # detections (coasts are the tracker's guesses)
+            uv = np.full_like(uv, np.nan)
+            uv[t.frame[keep]] = t.xy[keep] * np.array([clip.info.width, clip.info.height], float)
+        except (FormatError, OSError):
+            pass
+    measured = track_noise_px(uv)
+    return float(max(floor, measured or 0.0))
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,68 @@ if TYPE_CHECKING:
 
 #: how deep (m) a frame may sink into the floor or a wall before the flight is implausible
 PENETRATION_LIMIT_M = 0.05
+#: a racket hit on the other side of the net than its label says, beyond this (m), is implausible
+HIT_SIDE_TOLERANCE_M = 1.0
+
+
+@dataclass(frozen=True)
+class HitLimits:
+    """What players can do, for judging a fitted racket hit (court YAML ``plausibility``): where it can be
+    struck (the players' area, :func:`inference.players.tracking.player_area`, widened by the reach), how
+    high (``hits.height``), where an overhead can be (``overhead_behind_m`` behind the baseline at most) and
+    how fast the ball leaves (``max_speed_kmh``: overheads — serves, smashes — and other shots).
+
+    Attributes:
+        area: (K, 4) rectangles x0, x1, y0, y1 (m) where a hit may be; max_height: m; overhead_m: a hit at
+        least this high is an overhead; overhead_behind_m: how far behind the baseline an overhead may be;
+        max_overhead_kmh, max_other_kmh: launch speeds (None: no limit besides the fit's own).
+    """
+
+    area: np.ndarray
+    max_height: float
+    overhead_m: float = 2.2
+    overhead_behind_m: float | None = None
+    max_overhead_kmh: float | None = None
+    max_other_kmh: float | None = None
+
+    @classmethod
+    def from_court(cls, court: Court) -> HitLimits:
+        from inference.players.tracking import player_area
+
+        reach = float(court.hits.reach)
+        area = player_area(court).copy()
+        area[:, [0, 2]] -= reach
+        area[:, [1, 3]] += reach
+        d = court.extra.get("plausibility") or {}
+        speed = d.get("max_speed_kmh") or {}
+        num = lambda v: None if v is None else float(v)  # noqa: E731
+        return cls(area, float(court.hits.height[1]), float(d.get("overhead_m", 2.2)), num(d.get("overhead_behind_m")),
+                   num(speed.get("overhead")), num(speed.get("other")))
+
+    def problems(self, court: Court, point: np.ndarray, label: str, speed_ms: float | None) -> list[str]:
+        """Why a racket hit at ``point`` (3,) labelled ``label`` leaving at ``speed_ms`` cannot be ([]: it can)."""
+        x, y, z = (float(v) for v in point)
+        out = []
+        inside = ((x >= self.area[:, 0]) & (x <= self.area[:, 1]) & (y >= self.area[:, 2]) & (y <= self.area[:, 3]))
+        length = float(court.size[1])
+        behind = max(-y, y - length, 0.0)
+        if not inside.any():
+            beside = max(-x, x - float(court.size[0]), 0.0)
+            where = f"{behind:.1f} m behind the baseline" if behind >= beside else f"{beside:.1f} m beside the court"
+            out.append(f"a racket hit {where}, where no player stands")
+        if z > self.max_height:
+            out.append(f"a racket hit {z:.1f} m high, above any player's reach ({self.max_height:g} m)")
+        overhead = z >= self.overhead_m
+        if overhead and self.overhead_behind_m is not None and behind > self.overhead_behind_m:
+            out.append(f"an overhead ({z:.1f} m high) {behind:.1f} m behind the baseline")
+        side = "near" if y < court.net_y else "far"
+        if label in PLAYER_EVENTS and label != f"player_{side}" and abs(y - court.net_y) > HIT_SIDE_TOLERANCE_M:
+            out.append(f"a {label.removeprefix('player_')} player's hit {abs(y - court.net_y):.1f} m on the {side} side")
+        limit = self.max_overhead_kmh if overhead else self.max_other_kmh
+        if speed_ms is not None and limit is not None and 3.6 * speed_ms > limit:
+            kind = "an overhead" if overhead else "a shot"
+            out.append(f"{kind} leaving at {3.6 * speed_ms:.0f} km/h (players reach {limit:.0f})")
+        return out
 #: tolerance (m) of the clip-level "inside the court" figure
 INSIDE_TOLERANCE_M = 0.02
 
@@ -86,8 +148,10 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
     err = problem.last_norm * cfg.pixel_sigma
     live = problem.weights > 0
     limit = cfg.rms_fail_factor * cfg.pixel_sigma
+    limits = HitLimits.from_court(court)
     out = []
     ch = problem.chain
+    judged = _hits_by_flight(ch)
     for s, f in enumerate(ch.flights):
         m = own == s
         if not m.any():
@@ -118,7 +182,24 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
         speed = float(np.linalg.norm(sol.theta[f.vel]))
         if f.end is not None and speed > cfg.max_speed_ms:     # a free end's speed is pinned by its track alone
             reasons.append(f"launched at {3.6 * speed:.0f} km/h (> {3.6 * cfg.max_speed_ms:.0f} km/h)")
+        for c in judged.get(s, ()):  # its racket hits: where a player struck it, how high, how fast it left
+            leaving = speed if c == f.start and f.end is not None and not f.lead_in else None
+            reasons += limits.problems(court, ch.point(sol.theta, c), ch.contacts[c].label, leaving)
         out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e), deepest[0]))
+    return out
+
+
+def _hits_by_flight(ch) -> dict[int, list[int]]:
+    """The racket-hit contacts each flight answers for: the flight leaving a hit, else the one arriving."""
+    out: dict[int, list[int]] = {}
+    for c, ct in enumerate(ch.contacts):
+        if ct.kind != "hit":
+            continue
+        leaving = [s for s, f in enumerate(ch.flights) if f.start == c and not f.lead_in]
+        arriving = [s for s, f in enumerate(ch.flights) if f.end == c or (f.lead_in and f.start == c)]
+        owner = (leaving or arriving or [None])[0]
+        if owner is not None:
+            out.setdefault(owner, []).append(c)
     return out
 
 
@@ -248,6 +329,23 @@ def _other_labels(obs: Observations, prior) -> list[str]:
 # ---------------------------------------------------------------------------------------------------
 #: a clip with more than this share of its flights failed is not plausible
 MAX_FAILED_SHARE = 0.25
+#: a clip whose reconstructed flights cover less than this share of the frames from its first to its last
+#: event is not plausible (a replay of a tenth of the rally is no replay of the rally)
+MIN_COVERED_SHARE = 0.5
+
+
+def covered_share(fit: RallyFit, obs: Observations) -> float:
+    """The share of the frames from the first to the last event that a reconstructed flight covers (1 when
+    there is at most one event frame)."""
+    ev = obs.event_frames
+    if len(ev) < 2 or ev[-1] <= ev[0]:
+        return 1.0 if any(s.ok for s in fit.segments) else 0.0
+    span = np.arange(int(ev[0]), int(ev[-1]) + 1)
+    have = np.zeros(len(span), bool)
+    for s in fit.segments:
+        if s.ok and len(s.frames):
+            have |= (span >= s.frames[0]) & (span <= s.frames[-1])
+    return float(have.mean())
 
 
 def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None) -> dict:
@@ -279,8 +377,11 @@ def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None)
     # failed flights count too: a rally of which a third could not be reconstructed is no plausible replay
     failed, n = len(fit.segments) - len(ok), len(fit.segments)
     out["failed_share"] = round(failed / n, 4) if n else 0.0
+    covered = covered_share(fit, obs)
+    out["covered_share"] = round(covered, 4)
     why = (["no flight reconstructed"] if not ok else []) + \
         ([f"{failed}/{n} flights failed"] if ok and failed / n > MAX_FAILED_SHARE else []) + \
+        ([f"3D for {covered:.0%} of the rally only"] if ok and covered < MIN_COVERED_SHARE else []) + \
         ([f"{inside:.0%} of frames inside the court"] if inside < 0.98 else []) + \
         ([f"{below} contacts below the floor"] if below else []) + \
         ([f"{over} flights over the RMS limit"] if over else [])

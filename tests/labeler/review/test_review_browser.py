@@ -6,6 +6,7 @@ README screenshot.
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 
@@ -50,6 +51,11 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
         canvas = page.locator(WEBGL_CANVAS)
         # the video beside the 3D view at a usable size, named by the same frame number as the 3D ball
         wait_until(lambda: "frame 40 (3D view and video)" in page.inner_text("body"), what="the frame caption")
+        # the clip's 3D status comes first in the panel
+        status = page.locator(".rally3d-banner").first
+        wait_until(lambda: status.is_visible(), what="the 3D status banner")
+        assert status.inner_text().startswith("3D plausible: 13/13 flights reconstructed")
+        assert "3D covers 100% of the rally" in status.inner_text()
         video = page.locator("img[src^='blob:']").first  # the video frame (an object URL)
         wait_until(lambda: (video.bounding_box() or {}).get("width", 0) >= 600, what="the video panel at 600+ px")
         vbox, cbox = video.bounding_box(), canvas.bounding_box()
@@ -113,6 +119,10 @@ HOSTILE = '<img src=x onerror="window.__pwned=1">'
 
 def test_replay_html_has_the_video_the_shot_table_and_frame_numbers(reconstructed_clip, browser, tmp_path):
     clip = shutil.copytree(reconstructed_clip, tmp_path / HOSTILE)  # a hostile folder name stays text
+    seg = clip / "segments.json"  # and a hostile reason why the clip is not plausible
+    doc = json.loads(seg.read_text())
+    doc["plausibility"].update(plausible=False, not_plausible_because=[HOSTILE], covered_share=0.76)
+    seg.write_text(json.dumps(doc))
     data = ReviewData.load(clip)
     res = export_review(data, tmp_path / "out", stride=4, progress=False)
     page = browser.new_page(viewport={"width": 1500, "height": 850})
@@ -126,6 +136,11 @@ def test_replay_html_has_the_video_the_shot_table_and_frame_numbers(reconstructe
         shot = data.analysis.shots[1]
         assert first[:2] == [str(shot.index), f"{shot.team} shot @{shot.hit.frame}"] and first[5] == shot.verdict
         assert page.locator("#rally3d-side h3").inner_text() == HOSTILE
+        banner = page.locator("#rally3d-banner")  # the 3D status, red, at the top of the page
+        box = banner.bounding_box()
+        assert banner.is_visible() and box["y"] <= 1 and box["height"] >= 20
+        assert banner.inner_text().startswith(f"3D NOT plausible: {HOSTILE} — calls and figures below")
+        assert "3D covers 76% of the rally" in banner.inner_text()
         assert page.evaluate("window.__pwned === undefined")
         side, canvas = page.locator("#rally3d-side").bounding_box(), page.locator(WEBGL_CANVAS).bounding_box()
         assert side["x"] + side["width"] <= canvas["x"] + 1 and canvas["width"] >= 600  # side by side
