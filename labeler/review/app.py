@@ -3,7 +3,8 @@
 Shared by every viewer (``server.scene``): the court, the whole path, the contact markers. Per viewer
 (``client.scene`` / ``client.gui``, a :class:`Session`): the moving ball and its trail, the players, the
 timeline with its own play/pause and speed, the camera presets, the video frame with the reprojection drawn
-over it, and the shot panel. One background thread advances every playing session.
+over it, and the shot panel, under a banner with the clip's 3D status (red when it is not plausible). One
+background thread advances every playing session.
 
 Example (non-blocking, e.g. in tests or ``make demo``)::
 
@@ -28,6 +29,7 @@ from .panels import (
     current_shot_markdown,
     populate_cameras,
     populate_export,
+    populate_banner,
     populate_info,
     populate_playback,
     speed_of,
@@ -96,6 +98,7 @@ class Session:
         self.players = PlayerNodes(client.scene)
         gui = client.gui
         self.presets = camera_presets(d.camera, d.court)
+        self.banner = populate_banner(gui, d.analysis.plausibility)  # first: the 3D status before any figure
         self.panel = populate_playback(gui, d.first_frame, d.last_frame, d.event_marks())
         self.views = populate_cameras(gui, list(self.presets))
         self.info = populate_info(gui, app.frames.get(self.playback.frame), d.analysis, d.summary())

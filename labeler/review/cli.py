@@ -27,19 +27,25 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def shots_table(analysis) -> str:
-    """The shots as a console table."""
+    """The shots as a console table, after the clip's 3D status (:meth:`RallyAnalysis.status_lines`: a
+    ``3D NOT plausible`` / ``NOT judged`` banner first when it applies, and the rally's coverage). A shot
+    without trustworthy 3D shows no figure and no call, only ``no 3D: <why>``."""
+    from .shots import call_text
 
     def f(v, nd=1):
         return "" if v is None or not math.isfinite(v) else f"{v:.{nd}f}"
 
-    out = [f"{'shot':>4} {'team':>4} {'hit':>5} {'km/h':>6} {'net m':>6} {'bounce (m)':>14} {'call':>5} "
-           f"{'line cm':>8}  nearest line / reason"]
+    out = [*analysis.status_lines(),
+           f"{'shot':>4} {'team':>4} {'hit':>5} {'km/h':>6} {'net m':>6} {'bounce (m)':>14} {'call':>5} "
+           f"{'line cm':>8} {'σ cm':>5}  call / reason"]
     for s in analysis.shots:
-        b = s.first_bounce
-        xy = "" if b is None else f"({b.xy[0]:.2f},{b.xy[1]:.2f})"
+        b = s.first_bounce if s.has_3d else None
+        xy = "" if b is None or not b.judged else f"({b.xy[0]:.2f},{b.xy[1]:.2f})"
+        sigma = "" if b is None or not b.judged else (f(b.sigma_cm) or "?")
+        text = f"{call_text(b)}; {s.reason}" if b is not None and b.judged else s.reason
         out.append(f"{s.index:>4} {s.team:>4} {s.hit.frame:>5} {f(s.launch_speed_kmh):>6} "
                    f"{f(s.net_clearance_m, 2):>6} {xy:>14} {s.verdict:>5} "
-                   f"{'' if b is None else f(b.distance_cm, 0):>8}  {(b.line + ': ') if b else ''}{s.reason}")
+                   f"{'' if b is None else f(b.distance_cm, 0):>8} {sigma:>5}  {text}")
     return "\n".join(out)
 
 
@@ -47,8 +53,8 @@ def run(args: argparse.Namespace) -> int:
     from .data import ReviewData
 
     data = ReviewData.load(args.clip, first_hit_is_serve=not args.no_serve_rules)
+    print(shots_table(data.analysis))  # the 3D status first: the banner is the first line printed
     print(f"{args.clip}: {data.summary()['reconstructed']} reconstructed frames, {len(data.analysis.shots)} shots")
-    print(shots_table(data.analysis))
     if args.export is not None:
         from .export import export_review
 

@@ -18,7 +18,7 @@ from inference.camera import Camera
 from inference.clipio import Clip, FormatError, HitEvents, PlayerTracks
 from inference.court import Court, load_court
 
-from .shots import Contact, RallyAnalysis, Trajectory, analyse_rally, contacts_from_tables, read_segments
+from .shots import Contact, RallyAnalysis, Trajectory, analyse_reconstruction, read_segments_json
 
 
 @dataclass
@@ -28,7 +28,8 @@ class ReviewData:
     Attributes:
         clip, court, camera: the scene; fps; n_frames: frames of the video (clip.yaml).
         traj: the reconstructed 3D ball; uv: (n_frames, 2) the 2D ball of ball.csv in pixels (NaN none).
-        events: events.csv; contacts: events placed in 3D; analysis: shots and line calls.
+        events: events.csv; contacts: events placed in 3D; analysis: shots and line calls, and the clip-level
+        plausibility (``analysis.plausibility``; shots over failed flights carry no figure).
         players: players.csv (None when absent or empty); segments: segments.json's list ([] if absent).
         video_ok: whether the video can be opened (else the review shows a placeholder frame).
     """
@@ -80,9 +81,10 @@ class ReviewData:
         vis = track.visibility > 0
         uv[track.frame[vis]] = track.xy[vis] * np.asarray(camera.image_size, float)
         events = clip.read_events(missing_ok=True, n_frames=len(uv))
-        segments = read_segments(clip.segments_path)
-        contacts = contacts_from_tables(events, traj, segments)
-        analysis = analyse_rally(court, traj, contacts, info.fps, first_hit_is_serve=first_hit_is_serve)
+        doc = read_segments_json(clip.segments_path)
+        segments = [] if doc is None else doc["segments"]
+        contacts, analysis = analyse_reconstruction(court, traj, events, doc, info.fps,
+                                                    first_hit_is_serve=first_hit_is_serve)
         players = clip.read_players(missing_ok=True, n_frames=len(uv))
         return cls(clip, court, camera, float(info.fps), len(uv), traj, uv, events, contacts, analysis,
                    players if len(players) else None, segments, video_ok)
@@ -123,8 +125,9 @@ class ReviewData:
 
     def summary(self) -> dict:
         """A few figures for the console and the panel."""
-        rms = [s.get("reprojection_rms_px") for s in self.segments if s.get("reconstructed")]
-        rms = [r for r in rms if r is not None and math.isfinite(r)]
+        rms = [s.get("reprojection_rms_px") for s in self.segments
+               if isinstance(s, dict) and s.get("reconstructed") is True]
+        rms = [r for r in rms if isinstance(r, (int, float)) and math.isfinite(r)]
         return {"frames": self.n_frames, "reconstructed": len(self.traj.frame), "shots": len(self.analysis.shots),
                 "reprojection_rms_px": round(float(np.sqrt(np.mean(np.square(rms)))), 2) if rms else None,
                 "method": _method(self.clip.segments_path)}

@@ -3,9 +3,11 @@
 - ``replay.viser``: viser's scene serializer recording (court, contacts, the ball moving along its path with
   its trail and the players, one step per frame at real time). Play it with viser's static client:
   ``index.html?playbackPath=replay.viser`` served over HTTP (see the README's "3D review").
-- ``replay.html``: the same recording embedded in viser's self-contained client page, with a side panel: the
-  clip's video (copied next to it as ``video.<ext>``) and its frame number, the 3D view's frame number, and the
-  shot table (click a shot: the video jumps to its hit). The 3D recording labels each step with its frame.
+- ``replay.html``: the same recording embedded in viser's self-contained client page, with a side panel: at
+  its top the clip's 3D status (``#rally3d-banner``: red ``3D NOT plausible`` / ``NOT judged`` when it
+  applies, and the rally's coverage), the clip's video (copied next to it as ``video.<ext>``) and its frame
+  number, the 3D view's frame number, and the shot table (click a shot: the video jumps to its hit). The 3D
+  recording labels each step with its frame.
 - ``shots.csv``: one row per shot (:data:`labeler.review.shots.CSV_COLUMNS`).
 
 Example:
@@ -128,6 +130,10 @@ SIDE_CSS = """
 #rally3d-side tr.now td{background:#fff3b0}
 #rally3d-side tbody tr{cursor:pointer}
 .rally3d-frame{font:600 15px monospace;margin:4px 0}
+/* sticky: top -10px (the panel's padding) puts it at the very top */
+#rally3d-banner{position:sticky;top:-10px;margin:-10px -10px 8px;padding:8px 10px;font-size:14px;z-index:1}
+#rally3d-banner.bad{background:#ffd7d2;border-bottom:3px solid #c62828;color:#5a0000}
+#rally3d-banner.ok{background:#e8f5e9;border-bottom:1px solid #8bc48f;color:#1b4d20}
 """
 
 SIDE_JS = """
@@ -157,9 +163,22 @@ SIDE_JS = """
 """
 
 
+def banner_div(analysis: RallyAnalysis) -> str:
+    """The replay page's 3D status banner (:meth:`RallyAnalysis.status_lines`, escaped; "" without one)."""
+    lines = analysis.status_lines()
+    if not lines:
+        return ""
+    p = analysis.plausibility
+    kind = "ok" if p is not None and p.judged and p.plausible else "bad"
+    rest = "".join(f"<br>{html_lib.escape(t)}" for t in lines[1:])
+    return (f'<div id="rally3d-banner" class="{kind}" role="{"alert" if kind == "bad" else "status"}">'
+            f"<b>{html_lib.escape(lines[0])}</b>{rest}</div>")
+
+
 def side_panel_html(title: str, analysis: RallyAnalysis, fps: float, video_name: str | None) -> str:
-    """The replay page's side panel: the video with its frame number, and the shot table (every file-derived
-    string HTML-escaped; the script is ours and reads its figures from a JSON block)."""
+    """The replay page's side panel: the 3D status banner (:func:`banner_div`), the video with its frame
+    number, and the shot table (every file-derived string HTML-escaped; the script is ours and reads its
+    figures from a JSON block)."""
     esc = html_lib.escape
     head = "".join(f"<th>{esc(c)}</th>" for c in SHOT_COLUMNS)
     body = "".join("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in shot_cells(s)) + "</tr>" for s in analysis.shots)
@@ -167,7 +186,8 @@ def side_panel_html(title: str, analysis: RallyAnalysis, fps: float, video_name:
     video = (f'<video id="rally3d-video" src="{esc(video_name)}" controls muted preload="auto"></video>'
              '<div id="rally3d-video-frame" class="rally3d-frame"></div>' if video_name
              else "<p>(no video: the clip's video could not be read)</p>")
-    return (f"<style>{SIDE_CSS}</style><aside id=\"rally3d-side\"><h3>{esc(title)}</h3>{video}"
+    return (f"<style>{SIDE_CSS}</style><aside id=\"rally3d-side\">{banner_div(analysis)}"
+            f"<h3>{esc(title)}</h3>{video}"
             "<p>The 3D view (right) names its frame above the court; click a shot to put the video on its hit."
             f"</p><table id=\"rally3d-shots\"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
             f'<script type="application/json" id="rally3d-config">{esc(cfg, quote=False)}</script>'

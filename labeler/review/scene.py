@@ -175,6 +175,7 @@ def contact_labels(analysis, project=None) -> list[ContactLabel]:
                 b = calls.get(c.frame)
                 call = b.call if b else "-"
                 txt = call if b is None or not math.isfinite(b.distance_cm) else f"{call} {b.distance_cm:+.0f} cm"
+                txt = txt if s.has_3d else "no 3D"  # a shot over a failed flight: no call
                 anchor = np.array([c.position[0], c.position[1], 0.01])
             else:
                 txt, anchor = c.surface, np.asarray(c.position, float)

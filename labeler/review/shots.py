@@ -19,7 +19,15 @@ Rules applied (:func:`judge_shot`), with the court frame of docs/formats.md:
 - **Tennis.** Singles lines when the court YAML says ``players: 2`` (the shipped ``tennis.yaml``), doubles
   lines otherwise; the service boxes are singles-width in both.
 - **Distance to the nearest line** is signed, in centimetres: positive inside the target area (distance to
-  its closest boundary line), negative outside (distance to the area), 0 on the line.
+  its closest boundary line), negative outside (distance to the area), 0 on the line. Its 1-σ uncertainty is
+  the bounce position's covariance (ball_3d.csv) along the direction across that line; a call with
+  ``|distance| <= 2σ`` is flagged *too close to call* (the call stays, the flag says it is not certain).
+
+What the review never does (:func:`analyse_reconstruction`): give a figure or a call from a flight that
+failed its checks. A shot whose frames overlap a flight of segments.json with ``reconstructed: false``, or
+that has no 3D row inside it, is marked *no 3D* (:attr:`Shot.no_3d`): no speed, no clearance, no call,
+verdict ``-``. The clip-level check (segments.json's ``plausibility``) comes with the analysis
+(:class:`Plausibility`).
 
 Example:
     >>> analysis = analyse_clip(Clip("runs/demo/padel_sample"))
@@ -48,6 +56,8 @@ CALLS = ("in", "out", "fault", "-")
 """Line calls: ``-`` = not judged (before the serve, after the point was decided, or no 3D position)."""
 VERDICTS = ("in", "out", "fault", "let", "-")
 ON_LINE_TOL_M = 1e-9
+TOO_CLOSE_SIGMAS = 2.0
+"""A call whose distance to its line is at most this many σ (across the line) is *too close to call*."""
 SERVE_REACH_M = 1.0
 """A serve's ball may be struck up to this far in front of the server's service line."""
 KMH = 3.6
@@ -89,6 +99,25 @@ class Area:
         ox, oy = max(-d[0], -d[1], 0.0), max(-d[2], -d[3], 0.0)
         k = int(np.argmin(d))  # the most violated edge is the line the ball landed beyond
         return -float(math.hypot(ox, oy)), self.lines[k]
+
+    def across(self, xy) -> np.ndarray:
+        """(2,) floor point → (2,) unit direction along which :meth:`signed_distance` changes fastest there:
+        across the nearest line (inside, or beside the area), diagonal beyond a corner."""
+        x, y = float(xy[0]), float(xy[1])
+        ox = max(self.x0 - x, x - self.x1, 0.0)
+        oy = max(self.y0 - y, y - self.y1, 0.0)
+        if ox > ON_LINE_TOL_M or oy > ON_LINE_TOL_M:
+            return np.array([ox, oy]) / math.hypot(ox, oy)
+        d = np.array([x - self.x0, self.x1 - x, y - self.y0, self.y1 - y])
+        return np.array([1.0, 0.0]) if int(np.argmin(d)) < 2 else np.array([0.0, 1.0])
+
+
+def sigma_across(direction: np.ndarray, cov: np.ndarray) -> float:
+    """1-σ (m) of a position with covariance ``cov`` ((3, 3) or (2, 2), m²) along the unit floor ``direction``
+    (2,); NaN when the covariance is unknown (NaN) or not a covariance."""
+    c = np.asarray(cov, float)[:2, :2]
+    var = float(direction @ c @ direction)
+    return math.sqrt(var) if math.isfinite(var) and var >= 0 else float("nan")
 
 
 @dataclass(frozen=True)
@@ -189,17 +218,21 @@ class Contact:
 
     Attributes:
         frame: frame of the contact; event: events.csv label; position: (3,) ball centre (m), NaN unknown;
-        plane: court plane touched (segments.json), None for hits or when unknown.
+        plane: court plane touched (segments.json), None for hits or when unknown;
+        cov: (3, 3) the position's covariance (m², ball_3d.csv), NaN unknown.
     """
 
     frame: int
     event: str
     position: np.ndarray
     plane: str | None = None
+    cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.asarray(self.position, dtype=float).reshape(3)
         object.__setattr__(self, "position", p)
+        c = np.full((3, 3), np.nan) if self.cov is None else np.asarray(self.cov, dtype=float).reshape(3, 3)
+        object.__setattr__(self, "cov", c)
 
     @property
     def known(self) -> bool:
@@ -219,6 +252,8 @@ class BounceCall:
         frame: bounce frame; xy: (2,) ball centre on the floor (m); call: one of :data:`CALLS`;
         distance_cm: signed distance to the nearest line of the target area (+ in, − out), NaN when not
         judged; line: that line's name; reason: a sentence; target: the area judged against.
+        sigma_cm: 1-σ of the bounce position across that line (cm), NaN unknown.
+        uncertain: ``|distance_cm| <= 2 sigma_cm``: too close to call (False when σ is unknown).
     """
 
     frame: int
@@ -228,10 +263,44 @@ class BounceCall:
     line: str = ""
     reason: str = ""
     target: str = ""
+    sigma_cm: float = float("nan")
+    uncertain: bool = False
 
     def __post_init__(self) -> None:
         if self.call not in CALLS:
             raise ValueError(f"call must be one of {CALLS}, got {self.call!r}")
+
+    @property
+    def judged(self) -> bool:
+        """Whether the call was made against a line (a distance is known)."""
+        return math.isfinite(self.distance_cm)
+
+
+def _cm(v: float) -> str:
+    return f"{v:.1f}" if abs(v) < 1 else f"{v:.0f}"
+
+
+def sigma_note(b: BounceCall) -> str:
+    """The uncertainty of a judged call in words: ``within 2σ (±4 cm): too close to call``, ``±4 cm at 2σ`` or
+    ``σ unknown`` ("" for a call not judged against a line)."""
+    if not b.judged:
+        return ""
+    if not math.isfinite(b.sigma_cm):
+        return "σ unknown"
+    band = _cm(TOO_CLOSE_SIGMAS * b.sigma_cm)
+    return f"within 2σ (±{band} cm): too close to call" if b.uncertain else f"±{band} cm at 2σ"
+
+
+def call_text(b: BounceCall) -> str:
+    """A call in words, e.g. ``in, 3 cm inside the right side line — within 2σ (±4 cm): too close to call``;
+    a call not judged against a line gives its reason."""
+    if not b.judged:
+        return f"{b.call}: {b.reason}" if b.reason else b.call
+    d = b.distance_cm
+    side = "inside" if d > 0 else "outside"
+    where = f"on the {b.line}" if d == 0 else f"{_cm(abs(d))} cm {side} the {b.line}"
+    note = sigma_note(b)
+    return f"{b.call}, {where} — {note}" if b.uncertain else f"{b.call}, {where} ({note})"
 
 
 @dataclass
@@ -247,6 +316,7 @@ class Shot:
         launch_speed_kmh, max_speed_kmh, bounce_speed_kmh: speeds (NaN unknown).
         net_clearance_m: height of the ball's bottom above the net top where it crosses the net plane
             (negative = below the top: it hit or went through the net; NaN if it did not cross).
+        no_3d: why the shot has no trustworthy 3D ("" when it has): then no figure, no call, verdict ``-``.
     """
 
     index: int
@@ -262,19 +332,93 @@ class Shot:
     max_speed_kmh: float = float("nan")
     bounce_speed_kmh: float = float("nan")
     net_clearance_m: float = float("nan")
+    no_3d: str = ""
 
     @property
     def first_bounce(self) -> BounceCall | None:
         return self.bounces[0] if self.bounces else None
 
+    @property
+    def has_3d(self) -> bool:
+        return not self.no_3d
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """The clip-level check of a reconstruction (segments.json's ``plausibility``), as the review reports it.
+
+    Attributes:
+        judged: a check exists (False: no segments.json, or one without ``plausibility``).
+        plausible: the check passed (only a JSON ``true`` counts); because: its sentences when it did not.
+        flights, failed: flight counts (None unknown); covered_share: share of the rally's frames with 3D
+            (0–1, None unknown).
+    """
+
+    judged: bool
+    plausible: bool = False
+    because: tuple[str, ...] = ()
+    flights: int | None = None
+    failed: int | None = None
+    covered_share: float | None = None
+
+    @classmethod
+    def from_segments_json(cls, doc: object) -> Plausibility:
+        """From segments.json's parsed content (None when the file is absent); tolerant of damaged values."""
+        p = doc.get("plausibility") if isinstance(doc, dict) else None
+        if not isinstance(p, dict):
+            return cls(judged=False)
+        because = p.get("not_plausible_because")
+        because = tuple(str(b) for b in because) if isinstance(because, list) else ()
+        return cls(True, p.get("plausible") is True, because, _count(p.get("flights")),
+                   _count(p.get("failed")), _share(p.get("covered_share")))
+
+    def banner(self) -> str:
+        """The warning that comes first in every view ("" when the check passed)."""
+        if not self.judged:
+            return ("3D NOT judged: segments.json has no plausibility check (absent, or from an older "
+                    "rally3d) — calls and figures below are unchecked")
+        if self.plausible:
+            return ""
+        why = "; ".join(self.because) or (f"{self.failed}/{self.flights} flights failed" if self.failed else
+                                          "the reconstruction failed its checks")
+        return (f"3D NOT plausible: {why} — calls and figures below come only from the flights that passed "
+                "their checks")
+
+    def coverage(self) -> str:
+        """``3D covers 76% of the rally`` ("" when unknown)."""
+        return "" if self.covered_share is None else f"3D covers {self.covered_share:.0%} of the rally"
+
+    def lines(self) -> list[str]:
+        """The status lines every view shows first: the banner (or ``3D plausible: …``), then the coverage."""
+        head = self.banner()
+        if not head:
+            ok = f"{self.flights - (self.failed or 0)}/{self.flights}" if self.flights else ""
+            head = "3D plausible" + (f": {ok} flights reconstructed" if ok else "")
+        return [head, *([self.coverage()] if self.coverage() else [])]
+
+
+def _count(v: object) -> int | None:
+    return v if isinstance(v, int) and not isinstance(v, bool) and v >= 0 else None
+
+
+def _share(v: object) -> float | None:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and 0 <= v <= 1
+    return float(v) if ok else None
+
 
 @dataclass
 class RallyAnalysis:
-    """Every shot of a rally plus the floor bounces before the first hit (the padel serve's drop)."""
+    """Every shot of a rally plus the floor bounces before the first hit (the padel serve's drop), and the
+    clip-level check of its reconstruction (None: not a reconstruction, e.g. ground truth)."""
 
     shots: list[Shot]
     pre_serve: list[BounceCall] = field(default_factory=list)
     sport: str = ""
+    plausibility: Plausibility | None = None
+
+    def status_lines(self) -> list[str]:
+        """What every view shows first about the 3D (:meth:`Plausibility.lines`; [] without a check)."""
+        return self.plausibility.lines() if self.plausibility is not None else []
 
     @property
     def bounces(self) -> list[BounceCall]:
@@ -312,6 +456,7 @@ def judge_shot(rules: CourtRules, team: str, contacts: list[Contact], *, serve: 
     calls: list[BounceCall] = []
     bounced_in = False
     touched_net = False
+    close_note = ""
     for c in contacts:
         xy = c.position[:2]
         if verdict:  # the point is decided; later contacts are not judged
@@ -342,11 +487,18 @@ def judge_shot(rules: CourtRules, team: str, contacts: list[Contact], *, serve: 
                 call, why = "in", f"inside the {area.name}"
             else:
                 call, why = bad, f"{-d * 100:.0f} cm beyond the {line}"
-            calls.append(BounceCall(c.frame, xy, call, round(d * 100, 1), line, why, area.name))
+            sigma = sigma_across(area.across(xy), c.cov)
+            close = bool(sigma > 0 and abs(d) <= TOO_CLOSE_SIGMAS * sigma)
+            b = BounceCall(c.frame, xy, call, round(d * 100, 1), line, why, area.name,
+                           round(sigma * 100, 1) if math.isfinite(sigma) else float("nan"), close)
+            calls.append(b)
+            note = (f"; the bounce is within 2σ (±{_cm(TOO_CLOSE_SIGMAS * b.sigma_cm)} cm) of the {line}: "
+                    "too close to call" if close else "")
             if call != "in":
-                verdict, reason = call, f"first bounce {why}"
+                verdict, reason = call, f"first bounce {why}{note}"
             else:
                 bounced_in = True
+                close_note = note
             continue
         # a wall or the mesh (padel)
         if not bounced_in:
@@ -360,7 +512,7 @@ def judge_shot(rules: CourtRules, team: str, contacts: list[Contact], *, serve: 
         if bounced_in:
             verdict = "let" if serve and touched_net else "in"
             reason = ("touched the net, then bounced in the service box" if verdict == "let"
-                      else "bounced in; returned after the bounce")
+                      else "bounced in; returned after the bounce") + close_note
         elif volleyed:
             verdict, reason = "in", "returned before the bounce (volley)"
         else:
@@ -369,12 +521,42 @@ def judge_shot(rules: CourtRules, team: str, contacts: list[Contact], *, serve: 
 
 
 # --------------------------------------------------------------------------------------- the analysis
+COV_COLUMNS = ("cov_xx_m2", "cov_yy_m2", "cov_zz_m2", "cov_xy_m2", "cov_xz_m2", "cov_yz_m2")
+"""ball_3d.csv's optional covariance columns (docs/formats.md §13)."""
+
+
+def covariances(ball: Ball3D) -> np.ndarray:
+    """(N, 3, 3) the rows' position covariances (m²) from :data:`COV_COLUMNS`; NaN where unknown (a column
+    absent, a cell empty or not a number)."""
+    out = np.full((len(ball), 3, 3), np.nan)
+    if not all(c in ball.extra for c in COV_COLUMNS):
+        return out
+    v = {c: _floats(ball.extra[c]) for c in COV_COLUMNS}
+    for c, (i, j) in zip(COV_COLUMNS, ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        out[:, i, j] = out[:, j, i] = v[c]
+    return out
+
+
+def _floats(text: np.ndarray) -> np.ndarray:
+    """(N,) strings → (N,) floats, NaN for empty, non-numeric or infinite cells."""
+    out = np.full(len(text), np.nan)
+    for k, t in enumerate(np.asarray(text).tolist()):
+        try:
+            out[k] = float(t)
+        except (TypeError, ValueError):
+            pass
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
 @dataclass(frozen=True)
 class Trajectory:
-    """The 3D ball per frame: frame (N,) sorted unique, xyz (N, 3) metres."""
+    """The 3D ball per frame: frame (N,) sorted unique, xyz (N, 3) metres; cov (N, 3, 3) m², NaN unknown
+    (None: no covariance at all)."""
 
     frame: np.ndarray
     xyz: np.ndarray
+    cov: np.ndarray | None = None
 
     @classmethod
     def from_ball_3d(cls, ball: Ball3D) -> Trajectory:
@@ -383,7 +565,25 @@ class Trajectory:
         order = np.lexsort((np.array([rank.get(k, 3) for k in ball.kind]), ball.frame))
         f = ball.frame[order]
         keep = np.r_[True, f[1:] != f[:-1]] if len(f) else np.zeros(0, bool)
-        return cls(f[keep], ball.xyz[order][keep])
+        return cls(f[keep], ball.xyz[order][keep], covariances(ball)[order][keep])
+
+    def without(self, spans: list[tuple[int, int]]) -> Trajectory:
+        """The trajectory less the frames strictly inside each ``(start, end)`` span."""
+        drop = np.zeros(len(self.frame), bool)
+        for a, b in spans:
+            drop |= (self.frame > a) & (self.frame < b)
+        return Trajectory(self.frame[~drop], self.xyz[~drop], None if self.cov is None else self.cov[~drop])
+
+    def cov_near(self, frame: int, start: int, stop: int) -> np.ndarray:
+        """(3, 3) the covariance at ``frame``, else at the nearest frame of ``start … stop`` that has one;
+        NaN when none does."""
+        if self.cov is None:
+            return np.full((3, 3), np.nan)
+        m = (self.frame >= start) & (self.frame <= stop) & np.isfinite(self.cov).all(axis=(1, 2))
+        if not m.any():
+            return np.full((3, 3), np.nan)
+        k = np.flatnonzero(m)[int(np.argmin(np.abs(self.frame[m] - frame)))]
+        return self.cov[k]
 
     def at(self, frame: int) -> np.ndarray:
         """(3,) position at ``frame``; NaN where there is none."""
@@ -450,8 +650,48 @@ def looks_like_serve(rules: CourtRules, traj: Trajectory, team: str, hit: Contac
     return bool(speed.max() < DROP_SPEED_MS)
 
 
+@dataclass(frozen=True)
+class Flight:
+    """One flight of segments.json: frames ``start … end``; ``reason`` why it failed ("" if reconstructed)."""
+
+    index: int
+    start: int
+    end: int
+    reconstructed: bool
+    reason: str = ""
+
+
+def flights_of(segments: list) -> list[Flight]:
+    """segments.json's ``segments`` → :class:`Flight` s; entries without integer frames are skipped. Only a
+    JSON ``true`` counts as reconstructed."""
+    out = []
+    for s in segments:
+        if not isinstance(s, dict):
+            continue
+        a, b = s.get("start_frame"), s.get("end_frame")
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in (a, b)) or b < a:
+            continue
+        ok = s.get("reconstructed") is True
+        idx = s.get("index")
+        idx = idx if isinstance(idx, int) and not isinstance(idx, bool) else -1
+        out.append(Flight(idx, a, b, ok, "" if ok else str(s.get("reason") or "failed its checks")))
+    return out
+
+
+def no_3d_reason(start: int, end: int, traj: Trajectory, flights: list[Flight]) -> str:
+    """Why frames ``start … end`` (a shot) have no trustworthy 3D: the failed flights that overlap them (more
+    than a shared end frame), else a trajectory with no row strictly inside them; "" when they have 3D."""
+    failed = [f for f in flights if not f.reconstructed and f.start < end and f.end > start]
+    if failed:
+        return "; ".join(f"flight {f.start}–{f.end} failed: {f.reason}" for f in failed)
+    inner = traj.window(start + 1, end - 1) if end - start > 1 else traj.window(start, end)
+    return "" if len(inner[0]) else f"no 3D rows for frames {start}–{end}"
+
+
 def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: float, *,
-                  rules: CourtRules | None = None, first_hit_is_serve: bool = True) -> RallyAnalysis:
+                  rules: CourtRules | None = None, first_hit_is_serve: bool = True,
+                  flights: list[Flight] | None = None,
+                  plausibility: Plausibility | None = None) -> RallyAnalysis:
     """Split a rally's contacts into shots and compute every figure and call.
 
     Args:
@@ -461,6 +701,9 @@ def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: 
         first_hit_is_serve: treat the clip's first hit as the serve when its hitter stands behind their
             service line and the clip shows the serve's set-up (:func:`looks_like_serve`); False judges
             every shot as a rally shot.
+        flights: segments.json's flights; a shot overlapping a failed one gets no figure and no call
+            (:func:`no_3d_reason`; so does a shot with no 3D row).
+        plausibility: the clip-level check, carried to the result.
     """
     rules = rules or CourtRules.from_court(court)
     contacts = sorted(contacts, key=lambda c: c.frame)
@@ -479,12 +722,25 @@ def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: 
                  and rules.behind_service_line(team, float(hit.position[1]))
                  and looks_like_serve(rules, traj, team, hit, pre, fps))
         inner = contacts[i + 1: j]
+        why = no_3d_reason(hit.frame, int(end), traj, flights or [])
+        if why:
+            shots.append(_shot_without_3d(n, team, bool(serve), hit, int(end), list(inner), why))
+            continue
         verdict, reason, calls = judge_shot(rules, team, inner, serve=serve, server_x=float(hit.position[0]),
                                             volleyed=j < len(contacts))
         shot = Shot(n, team, bool(serve), hit, int(end), list(inner), calls, verdict, reason)
         _add_figures(shot, court, traj, fps)
         shots.append(shot)
-    return RallyAnalysis(shots, pre_calls, rules.sport)
+    return RallyAnalysis(shots, pre_calls, rules.sport, plausibility)
+
+
+def _shot_without_3d(index: int, team: str, serve: bool, hit: Contact, end: int, contacts: list[Contact],
+                     why: str) -> Shot:
+    """A shot with no trustworthy 3D: its floor bounces listed, none called, no figure, verdict ``-``."""
+    reason = f"no 3D: {why}"
+    nowhere = np.full(2, np.nan)
+    calls = [BounceCall(c.frame, nowhere, "-", reason=reason) for c in contacts if c.event == "ground"]
+    return Shot(index, team, serve, hit, end, contacts, calls, "-", reason, no_3d=why)
 
 
 def _add_figures(shot: Shot, court: Court, traj: Trajectory, fps: float) -> None:
@@ -509,57 +765,107 @@ def _add_figures(shot: Shot, court: Court, traj: Trajectory, fps: float) -> None
 
 
 # ------------------------------------------------------------------------------------------- clip I/O
+def read_segments_json(path: Path) -> dict | None:
+    """segments.json's content (None when the file is absent); :class:`FormatError` unless it is an object
+    with a ``segments`` list."""
+    if not path.is_file():
+        return None
+    data = load_json(path, fix="re-run `rally3d reconstruct <clip>`")
+    if not isinstance(data, dict) or not isinstance(data.get("segments"), list):
+        raise FormatError(path, "expected an object with a `segments` list", fix="re-run `rally3d reconstruct <clip>`")
+    return data
+
+
 def read_segments(path: Path) -> list[dict]:
     """segments.json's ``segments`` list ([] when the file is absent)."""
-    if not path.is_file():
-        return []
-    data = load_json(path, fix="re-run `rally3d reconstruct <clip>`")
-    segs = data.get("segments") if isinstance(data, dict) else None
-    if not isinstance(segs, list):
-        raise FormatError(path, "expected an object with a `segments` list", fix="re-run `rally3d reconstruct <clip>`")
-    return segs
+    data = read_segments_json(path)
+    return [] if data is None else data["segments"]
 
 
 def contacts_from_tables(events: HitEvents, traj: Trajectory, segments: list[dict]) -> list[Contact]:
     """Place each event in 3D: the fitted contact point of segments.json where a reconstructed segment
-    starts or ends at that frame (with its plane), else the trajectory at that frame (NaN if none)."""
+    starts or ends at that frame (with its plane), else the trajectory at that frame (NaN if none). Its
+    covariance is the trajectory's at that frame, else at the nearest frame of a reconstructed flight through
+    it (:meth:`Trajectory.cov_near`)."""
     fitted: dict[int, tuple[list, str | None]] = {}
+    spans: dict[int, tuple[int, int]] = {}
+    ok = {(f.start, f.end) for f in flights_of(segments) if f.reconstructed}
     for s in segments:
-        if not s.get("reconstructed"):
+        if not isinstance(s, dict) or (s.get("start_frame"), s.get("end_frame")) not in ok:
             continue
-        if s.get("start_point_m") is not None:
-            fitted.setdefault(int(s["start_frame"]), (s["start_point_m"], s.get("start_plane")))
-        if s.get("end_point_m") is not None:
-            fitted[int(s["end_frame"])] = (s["end_point_m"], s.get("end_plane"))
+        a, b = int(s["start_frame"]), int(s["end_frame"])
+        for f in (a, b):
+            lo, hi = spans.get(f, (f, f))
+            spans[f] = (min(lo, a), max(hi, b))
+        if _point(s.get("start_point_m")) is not None:
+            fitted.setdefault(a, (_point(s["start_point_m"]), s.get("start_plane")))
+        if _point(s.get("end_point_m")) is not None:
+            fitted[b] = (_point(s["end_point_m"]), s.get("end_plane"))
     out = []
     for f, ev in zip(events.frame.tolist(), events.event.tolist()):
+        cov = traj.cov_near(f, *spans.get(f, (f, f)))
         if f in fitted:
             p, plane = fitted[f]
-            out.append(Contact(f, ev, np.asarray(p, float), plane if ev not in HIT_EVENTS else None))
+            plane = plane if isinstance(plane, str) and ev not in HIT_EVENTS else None
+            out.append(Contact(f, ev, p, plane, cov))
         else:
-            out.append(Contact(f, ev, traj.at(f)))
+            out.append(Contact(f, ev, traj.at(f), cov=cov))
     return out
+
+
+def _point(v: object) -> np.ndarray | None:
+    """segments.json's ``[x, y, z]`` → (3,) floats; None when it is not one."""
+    try:
+        p = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return p if p.shape == (3,) else None
+
+
+def analyse_reconstruction(court: Court, traj: Trajectory, events: HitEvents, segments_doc: dict | None,
+                           fps: float, *,
+                           first_hit_is_serve: bool = True) -> tuple[list[Contact], RallyAnalysis]:
+    """Analyse a reconstruction as the review shows it: the rows strictly inside failed flights are left out
+    (a row there is no trustworthy 3D), shots over them get no figure and no call, and the analysis carries
+    segments.json's plausibility ("not judged" when ``segments_doc`` is None or has none).
+
+    Returns:
+        (every event placed in 3D, the analysis).
+    """
+    segments = segments_doc["segments"] if segments_doc is not None else []
+    flights = flights_of(segments)
+    trusted = traj.without([(f.start, f.end) for f in flights if not f.reconstructed])
+    contacts = contacts_from_tables(events, trusted, segments)
+    analysis = analyse_rally(court, trusted, contacts, fps, first_hit_is_serve=first_hit_is_serve,
+                             flights=flights, plausibility=Plausibility.from_segments_json(segments_doc))
+    return contacts, analysis
 
 
 def analyse_clip(clip: Clip, court: Court | None = None, *, gt: bool = False,
                  first_hit_is_serve: bool = True) -> RallyAnalysis:
-    """Analyse a clip's reconstruction (``ball_3d.csv`` + ``segments.json`` + ``events.csv``), or its
-    ground truth (``gt/``) with ``gt=True``."""
+    """Analyse a clip's reconstruction (``ball_3d.csv`` + ``segments.json`` + ``events.csv``,
+    :func:`analyse_reconstruction`), or its ground truth (``gt/``) with ``gt=True`` (no plausibility)."""
     court = court or load_court(clip.court_path())
     path = (clip.gt_dir if gt else clip.root) / "ball_3d.csv"
     if not path.is_file():
         raise FormatError(path, "file not found", fix=f"run `rally3d reconstruct {clip.root}` first")
     traj = Trajectory.from_ball_3d(clip.read_ball_3d(gt=gt))
     events = clip.read_events(gt=gt and (clip.gt_dir / "events.csv").is_file())
-    segments = [] if gt else read_segments(clip.segments_path)
-    contacts = contacts_from_tables(events, traj, segments)
-    return analyse_rally(court, traj, contacts, clip.info.fps, first_hit_is_serve=first_hit_is_serve)
+    if gt:
+        return analyse_rally(court, traj, contacts_from_tables(events, traj, []), clip.info.fps,
+                             first_hit_is_serve=first_hit_is_serve)
+    return analyse_reconstruction(court, traj, events, read_segments_json(clip.segments_path), clip.info.fps,
+                                  first_hit_is_serve=first_hit_is_serve)[1]
 
 
 CSV_COLUMNS = ("shot", "team", "serve", "hit_frame", "end_frame", "hit_x_m", "hit_y_m", "hit_z_m",
                "launch_speed_kmh", "max_speed_kmh", "net_clearance_m", "bounce_frame", "bounce_x_m",
                "bounce_y_m", "bounce_speed_kmh", "call", "line_distance_cm", "nearest_line", "target",
-               "verdict", "reason", "contacts")
+               "verdict", "reason", "contacts", "status", "no_3d_reason", "line_sigma_cm",
+               "too_close_to_call", "call_note")
+"""shots.csv's columns. ``status``: ``ok`` or ``no 3D`` (then ``no_3d_reason`` says why and no figure or call
+is given); ``line_sigma_cm``: 1-σ of the first bounce across its line; ``too_close_to_call``: 1 when the line
+is within 2σ, 0 when not, empty when σ is unknown or nothing was judged; ``call_note``: that in words."""
 
 
 def shot_rows(analysis: RallyAnalysis) -> list[dict]:
@@ -582,6 +888,11 @@ def shot_rows(analysis: RallyAnalysis) -> list[dict]:
             "nearest_line": "" if b is None else b.line, "target": "" if b is None else b.target,
             "verdict": s.verdict, "reason": s.reason,
             "contacts": ";".join(f"{c.surface}@{c.frame}" for c in s.contacts),
+            "status": "ok" if s.has_3d else "no 3D", "no_3d_reason": s.no_3d,
+            "line_sigma_cm": "" if b is None else num(b.sigma_cm, 1),
+            "too_close_to_call": ("" if b is None or not b.judged or not math.isfinite(b.sigma_cm)
+                                  else int(b.uncertain)),
+            "call_note": "" if b is None else sigma_note(b),
         })
     return rows
 
