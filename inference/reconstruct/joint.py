@@ -302,15 +302,11 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     if len(problem.frames) < cfg.min_observed:
         return f"only {len(problem.frames)} 2D ball positions between frames {chain.first_frame} and {chain.last_frame}"
     if mute:
-        for a, b in mute:
-            problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
+        problem.mute(mute)
     try:
         sol = solve(problem, theta)
     except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): the plan fails
         return f"the fit diverged ({e})"
-    if mute:  # keep muted frames muted through the reweighting
-        for a, b in mute:
-            problem.weights[(problem.frames >= a) & (problem.frames <= b)] = 0.0
     checks = check_flights(problem, sol, cfg)
     return ChainFit(plan, problem, sol, checks)
 
@@ -422,22 +418,48 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
 
 
 def _bad_flights(fit: ChainFit) -> list[int]:
-    """Flights between two contacts that fail their checks."""
-    return [k for k, c in enumerate(fit.checks) if not c.ok and fit.problem.chain.flights[k].end is not None]
+    """Flights between two contacts that fail their checks, the worst fitted first (a flight that is far off
+    bends its neighbours: their hypotheses wait until it is explained)."""
+    bad = [k for k, c in enumerate(fit.checks) if not c.ok and fit.problem.chain.flights[k].end is not None]
+    rms = [fit.checks[k].rms_px for k in bad]
+    return [k for _, k in sorted(zip([-(r if r == r else 0.0) for r in rms], bad))]
+
+
+#: refit hypotheses that leave this many 2D points (or a tenth of the rally's) unexplained more or less than
+#: another are as good as it by that measure, and compete on their fit alone
+UNEXPLAINED_TOLERANCE = 5
+
+
+def unexplained(fit: ChainFit, span: tuple[int, int]) -> tuple[int, float]:
+    """How much of the 2D track over ``span`` (first, last frame) a fit leaves unexplained: the points that no
+    passing flight explains (a failing flight's, one the chain does not reach, a detection left out), and the
+    squared residuals (σ units) of the others. Dropping a contact so that a failing flight disappears, with
+    the track it had to explain, is no gain."""
+    pb = fit.problem
+    seen = np.isfinite(pb.obs.uv[span[0]:span[1] + 1]).all(axis=1)
+    own = pb.owners(pb.frames, fit.sol.aux["taus"])
+    passing = np.array([c.ok for c in fit.checks], bool)[own] & (pb.weights > 0)
+    passing &= (pb.frames >= span[0]) & (pb.frames <= span[1])
+    return int(seen.sum() - passing.sum()), float(np.sum(pb.last_norm[passing] ** 2))
 
 
 def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -> ChainFit:
     """Try other contact hypotheses for each flight that does not fit; keep the best that explains the track;
     then refit with the frames of what still fails muted, so it does not pull its neighbours."""
     tried: set[tuple] = {fit.plan.key()}
+    # one yardstick for every hypothesis: the track between the first and the last event (the free ends beyond
+    # are what the track alone pins; a hypothesis that explains them differently is no better for it)
+    span = (int(obs.event_frames[0]), int(obs.event_frames[-1]))
     for _ in range(cfg.max_refits):
         # hypotheses only for flights between two contacts: a free end that does not fit is muted below
         bad = _bad_flights(fit)
         if not bad:
             break
         improved = False
+        current = unexplained(fit, span)
+        tol = max(UNEXPLAINED_TOLERANCE, int(0.1 * np.isfinite(obs.uv[span[0]:span[1] + 1]).all(axis=1).sum()))
         for k in bad:
-            best = None
+            kept = []
             for plan in hypotheses(obs, fit, k, cfg):
                 if plan.key() in tried:
                     continue
@@ -448,13 +470,12 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
                                       warm=_remember(fit.problem.chain, fit.sol.theta))
                 if isinstance(cand, str):
                     continue
-                n_bad = len(_bad_flights(cand))
-                score = (n_bad, cand.cost)
-                if n_bad < len(bad) or (n_bad == len(bad) and cand.cost < 0.5 * fit.cost):
-                    if best is None or score < best[0]:
-                        best = (score, cand)
-            if best is not None:
-                fit = best[1]
+                n, cost = unexplained(cand, span)
+                if n < current[0] - tol or (n <= current[0] + tol and cost < 0.5 * current[1]):
+                    kept.append((n, cost, cand))
+            if kept:  # of those explaining about as much of the track as the best, the one that fits it best
+                least = min(n for n, _, _ in kept)
+                fit = min((c for c in kept if c[0] <= least + tol), key=lambda c: c[1])[2]
                 improved = True
                 break
         if not improved:
@@ -531,6 +552,8 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
                                               "not pin the depth)"))
             continue
         seen = np.isfinite(obs.uv[seg_frames]).all(axis=1)
+        left_out = np.isin(seg_frames, pb.frames[pb.outliers]) & seen  # detections the fit left out (short runs)
+        seen &= ~left_out
         err = np.linalg.norm(obs.camera.project(xyz[m][seen]) - obs.uv[seg_frames[seen]], axis=1)
         short = _too_short(seg_frames, int(seen.sum()), hi - lo + 1 if 0 <= seg.index < E - 1 else 0)
         if short:
@@ -569,6 +592,11 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             sf.figures["flags"] = flags
         if notes:
             sf.figures["refit"] = notes
+        if left_out.any():
+            off = np.linalg.norm(obs.camera.project(xyz[m][left_out]) - obs.uv[seg_frames[left_out]], axis=1)
+            fr = seg_frames[left_out]
+            sf.figures["outliers_left_out"] = (f"{len(fr)} detection{'s' if len(fr) > 1 else ''} (frames {fr[0]}–{fr[-1]}) "
+                                               f"up to {off.max():.0f} px off the flight, left out")
         if len(dropped):
             span = f"frame {dropped[0]}" if len(dropped) == 1 else f"{len(dropped)} frames ({dropped[0]}–{dropped[-1]})"
             sf.figures["dropped_frames"] = f"{span} of a failing neighbour left out ({why})"

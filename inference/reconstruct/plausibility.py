@@ -146,6 +146,8 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
     depth, where = penetration(court, xyz)
     obs_own = problem.owners(problem.frames, taus)
     err = problem.last_norm * cfg.pixel_sigma
+    j_obs = problem.index(fl, obs_own, problem.frames)
+    res = (problem.obs.camera.project(fl.P[obs_own, 0, j_obs]) - problem.uv) / cfg.pixel_sigma  # (M, 2) in σ
     live = problem.weights > 0
     limit = cfg.rms_fail_factor * cfg.pixel_sigma
     limits = HitLimits.from_court(court)
@@ -163,7 +165,12 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
         reasons = []
         if len(e) and rms > limit:
             reasons.append(f"reprojection RMS {rms:.1f} px > {cfg.rms_fail_factor:g} × the 2D noise "
-                           f"({cfg.pixel_sigma:g} px)")
+                           f"({cfg.pixel_sigma:.2g} px)")
+        else:
+            bent = structured_misfit(res[(obs_own == s) & live])
+            if bent > STRUCTURE_LIMIT:
+                reasons.append(f"the track bends where the flight does not (its residuals run {bent:.1f} σ to one "
+                               "side over 5 frames: a contact missed?)")
         k = int(np.argmax(np.where(m, depth, -1.0)))
         deepest = (float(depth[k]), where[k], f"frame {frames[k]}")
         # its contacts too: a contact on an unbounded plane (the net's, a wall's) can sit below the floor
@@ -187,6 +194,23 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
             reasons += limits.problems(court, ch.point(sol.theta, c), ch.contacts[c].label, leaving)
         out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e), deepest[0]))
     return out
+
+
+#: a flight whose residuals, median-filtered over 5 observed frames, run this many σ to one side fits the
+#: track badly even when its RMS passes: a missed contact bends the track (white noise stays below ~1.8 σ)
+STRUCTURE_LIMIT = 2.5
+
+
+def structured_misfit(res: np.ndarray, width: int = 5) -> float:
+    """How far (σ) the residuals ``res`` (M, 2, in units of the 2D noise, frame order) of one flight run to
+    one side: the largest norm of their running median over ``width`` consecutive observations (0 with
+    fewer than 3 × ``width``). A flight that fits leaves white noise; one hiding a contact leaves a bend."""
+    res = np.asarray(res, float)
+    if len(res) < 3 * width:
+        return 0.0
+    res = np.where(np.isfinite(res), res, 0.0)
+    win = np.lib.stride_tricks.sliding_window_view(res, width, axis=0)      # (M-w+1, 2, w)
+    return float(np.max(np.linalg.norm(np.median(win, axis=2), axis=1)))
 
 
 def _hits_by_flight(ch) -> dict[int, list[int]]:
@@ -262,9 +286,50 @@ def _kink_frames(obs: Observations, first: int, last: int, residual_frames: np.n
     return list(dict.fromkeys(out))
 
 
+def _gap_frames(obs: Observations, first: int, last: int, min_gap: int = 3) -> list[int]:
+    """The middle frame of every run of at least ``min_gap`` frames without a 2D ball inside ``[first, last]``
+    (a contact the tracker lost, or one out of the picture), longest run first."""
+    seen = np.isfinite(obs.uv[first:last + 1]).all(axis=1)
+    m = np.r_[0, (~seen).astype(int), 0]
+    edges = np.flatnonzero(np.diff(m))
+    runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_gap and a > 0 and b <= len(seen) - 1]
+    return [first + (a + b) // 2 for a, b in sorted(runs, key=lambda r: r[0] - r[1])]
+
+
+def _gap_beside(obs: Observations, frame: int, reach: int = 3, min_gap: int = 3) -> int | None:
+    """The middle of a gap of at least ``min_gap`` frames that ends or starts within ``reach`` frames of
+    ``frame`` (the contact was timed where the ball reappeared), or None."""
+    seen = np.isfinite(obs.uv).all(axis=1)
+    T = len(seen)
+    for d in range(0, reach + 1):
+        for g in (frame - d, frame + d):
+            if not (0 < g < T - 1) or seen[g]:
+                continue
+            a = g
+            while a > 0 and not seen[a - 1]:
+                a -= 1
+            b = g
+            while b < T - 1 and not seen[b + 1]:
+                b += 1
+            if b - a + 1 >= min_gap and a > 0 and b < T - 1:
+                return (a + b) // 2
+    return None
+
+
+def _side_label(fit: ChainFit, frame: int) -> str:
+    """``player_near`` or ``player_far``: the side of the net where the fitted flight is at ``frame``."""
+    pb, sol = fit.problem, fit.sol
+    frames, own, j = pb.frame_positions(sol.aux["flights"], sol.aux["taus"])
+    k = int(np.clip(np.searchsorted(frames, frame), 0, len(frames) - 1))
+    y = float(sol.aux["flights"].P[own[k], 0, j[k]][1])
+    return "player_near" if not np.isfinite(y) or y < pb.obs.court.net_y else "player_far"
+
+
 def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
     """Plans to try for flight ``k`` of a fitted chain that fails its checks (yielded lazily, most likely
-    first): a missed bounce inside it, another surface or event class at its contacts, no contact at all."""
+    first): a missed bounce inside it (at the track's sharpest turn, then in its gaps: a bounce the tracker
+    lost or one outside the picture), a missed racket hit (a volley, a hit hidden by the player), another
+    surface or event class at its contacts, no contact at all."""
     from .joint import Plan, PlanContact
 
     pb = fit.problem
@@ -277,18 +342,27 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
     def plan_with(new: list, note: tuple[int, str]) -> Plan:
         return Plan(new, [*fit.plan.notes, note])
 
-    # 1. a missed bounce inside the flight
-    label = _bounce_label(obs.court)
-    for frame in _kink_frames(obs, chk.first, chk.last, pb.frames, pb.last_norm):
+    def inserted(frame: int, label: str, what: str):
         prior = contact_prior(obs, frame, label)
-        if not prior.ok:
-            continue
-        note = f"contact inserted at frame {frame} ({prior.plane.name}): the flight over frames {chk.first}–" \
-               f"{chk.last} did not fit as one ({why})"
+        if label not in PLAYER_EVENTS and prior.plane is None:
+            return None
+        where = prior.plane.name if prior.plane is not None else what
+        note = f"contact inserted at frame {frame} ({where}): the flight over frames {chk.first}–{chk.last} did " \
+               f"not fit as one ({why})"
         pos = sum(c.prior.frame < frame for c in contacts)
-        yield plan_with(contacts[:pos] + [PlanContact(prior, None, note)] + contacts[pos:], (frame, note))
-    # 2. another surface or event class at its contacts; 3. no contact there at all
+        return plan_with(contacts[:pos] + [PlanContact(prior, None, note)] + contacts[pos:], (frame, note))
+
     ends = [f.start] + ([f.end] if f.end is not None else [])
+    # 1. a missed bounce inside the flight at a sharp turn of the track
+    label = _bounce_label(obs.court)
+    kinks = [fr for fr in _kink_frames(obs, chk.first, chk.last, pb.frames, pb.last_norm)
+             if contact_prior(obs, fr, label).ok]
+    gaps = [fr for fr in _gap_frames(obs, chk.first, chk.last) if fr not in kinks]
+    for frame in kinks:
+        plan = inserted(frame, label, "a surface")
+        if plan is not None:
+            yield plan
+    # 2. another surface or event class at its contacts
     for c in ends:
         pc = contacts[c]
         old = pc.prior
@@ -299,6 +373,30 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
             note = f"event at frame {old.frame} fitted as {lab} instead of {old.label} ({why})"
             yield plan_with(contacts[:c] + [replace(pc, prior=prior, note=note)] + contacts[c + 1:],
                             (old.frame, note))
+    # 3. a missed bounce in a gap of the track (one the tracker lost, or out of the picture: bridged)
+    for frame in gaps:
+        plan = inserted(frame, label, "a surface")
+        if plan is not None:
+            yield plan
+    # 4. a missed racket hit: a volley or a hit the tracker lost (a serve in the gap after its toss), by the
+    #    player on the side of the net where the fit has the ball first, then by the other
+    for frame in kinks[:1] + gaps[:1]:
+        side = _side_label(fit, frame)
+        for lab in (side, "player_far" if side == "player_near" else "player_near"):
+            plan = inserted(frame, lab, "a racket")
+            if plan is not None:
+                yield plan
+    # 5. a contact timed at the edge of a gap of the track moved into the gap (the tracker lost the ball before a
+    #    bounce far away; the model put the bounce where the ball reappeared)
+    for c in ends:
+        pc = contacts[c]
+        g = _gap_beside(obs, pc.prior.frame)
+        if g is None or pc.prior.label in PLAYER_EVENTS:
+            continue
+        prior = contact_prior(obs, g, pc.prior.label)
+        note = f"event {pc.prior.label} at frame {pc.prior.frame} moved to frame {g}, inside the track's gap ({why})"
+        yield plan_with(contacts[:c] + [replace(pc, prior=prior, note=note)] + contacts[c + 1:], (g, note))
+    # 6. no contact there at all
     for c in ends:
         if len(contacts) > 1:
             old = contacts[c].prior

@@ -130,6 +130,9 @@ class ShootingConfig:
 
     pixel_sigma: float = 2.0          # px, 2D measurement noise
     huber_k: float = 3.0              # reprojection residuals beyond k σ are down-weighted
+    outlier_k: float = 8.0            # ... and beyond this, in short runs, left out (a detector stuck elsewhere)
+    outlier_run_s: float = 0.25       # longest run of such detections left out (s)
+    outlier_share: float = 0.25       # most of a flight's 2D points left out (more: the flight fails instead)
     continuity_sigma: float = 0.005   # m
     tau_sigma: float = 1.5            # frames, prior on the contact time around the event frame
     tau_window: float = 2.5           # frames, the contact time stays within the event frame ± this
@@ -464,6 +467,11 @@ class Problem:
         self.frames = frames[seen]
         self.uv = obs.uv[self.frames]
         self.weights = np.ones(len(self.frames))
+        self.muted = np.zeros(len(self.frames), bool)   # frames left out by the caller (a failing flight's)
+        #: short runs of detections the track jumps to and away from (:func:`jump_runs`): left out from the start
+        self.jumps = jump_runs(self.frames, self.uv, obs.camera.image_size, obs.fps)
+        self.outliers = self.jumps.copy()  # detections the fit leaves out (:meth:`find_outliers`)
+        self.weights[self.jumps] = 0.0
         self.event_frames = np.array([ct.frame for ct in chain.contacts])
         nets = [p for p in obs.court.planes if p.event == "net"]
         self.net = nets[0] if nets else None
@@ -940,10 +948,47 @@ class Problem:
                 theta[out.spin] = wo[0]
         return theta
 
+    def mute(self, spans: list[tuple[int, int]]) -> None:
+        """Leave the frames of ``spans`` (first, last) out of the fit (weights 0 through every reweighting)."""
+        for a, b in spans:
+            self.muted |= (self.frames >= a) & (self.frames <= b)
+        self.weights[self.muted] = 0.0
+
     def reweight(self) -> None:
-        """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs)."""
+        """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs); muted
+        frames and short runs of detections far off the fit (:meth:`find_outliers`) weigh nothing."""
         k = self.cfg.huber_k
-        self.weights = np.where(self.last_norm > k, np.sqrt(k / np.maximum(self.last_norm, 1e-12)), 1.0)
+        self.outliers = self.find_outliers() | self.jumps
+        w = np.where(self.last_norm > k, np.sqrt(k / np.maximum(self.last_norm, 1e-12)), 1.0)
+        w[self.muted | self.outliers] = 0.0
+        self.weights = w
+
+    def find_outliers(self) -> np.ndarray:
+        """(M,) detections to leave out: beyond ``outlier_k`` σ of the latest fit, in runs of at most
+        ``outlier_run_s`` with well-fitted detections of the same flight on both sides, and at most
+        ``outlier_share`` of their flight's 2D points (a flight whose track is off more than that fails its
+        checks instead: nothing hides a wrong flight)."""
+        cfg = self.cfg
+        far = (self.last_norm > cfg.outlier_k) & ~self.muted & ~self.jumps
+        if not far.any() or self.norm_at is None:
+            return np.zeros(len(self.frames), bool)
+        own = self.owners(self.frames, self.taus(self.norm_at))
+        longest = max(1, int(round(cfg.outlier_run_s * self.fps)))
+        out = np.zeros(len(self.frames), bool)
+        for s in np.unique(own[far]):
+            mine = own == s
+            cand = far & mine
+            k = np.flatnonzero(cand)
+            runs = np.split(k, np.flatnonzero(np.diff(self.frames[k]) > 1) + 1)
+            if max(len(r) for r in runs) > longest or len(k) > cfg.outlier_share * mine.sum():
+                continue
+            inner = np.flatnonzero(mine & ~far)
+            if not len(inner):
+                continue
+            for r in runs:  # inside the flight's track only: its ends are where a flight model is least sure
+                if self.frames[inner[0]] < self.frames[r[0]] and self.frames[r[-1]] < self.frames[inner[-1]]:
+                    out[r] = True
+        return out
 
     def clamp(self, theta: np.ndarray) -> np.ndarray:
         """Project θ onto what is possible: contact times in their windows and in order, racket hits within
@@ -978,6 +1023,41 @@ class Problem:
             if speed > cap:
                 theta[f.vel] *= cap / speed
         return theta
+
+
+#: a detection this far (share of the image width) from the one before, per frame between them, is a jump no
+#: broadcast ball makes: 0.15 of 1920 px is 288 px a frame (the fastest serve seen from 20 m: ~100)
+JUMP_SHARE = 0.15
+#: the longest run of detections (s) that a jump to and away from marks as a detection of something else
+JUMP_RUN_S = 0.2
+
+
+def jump_runs(frames: np.ndarray, uv: np.ndarray, image_size, fps: float) -> np.ndarray:
+    """(M,) the detections of short runs (≤ :data:`JUMP_RUN_S`) that the track jumps to and away from (or to,
+    then loses): a tracker stuck for a few frames on something far from the ball. ``frames`` (M,) sorted, ``uv``
+    (M, 2) pixels; a jump is :data:`JUMP_SHARE` × the image width per frame or more, and the run must be
+    shorter than the runs around it."""
+    M = len(frames)
+    out = np.zeros(M, bool)
+    if M < 3:
+        return out
+    limit = JUMP_SHARE * float(image_size[0])
+    step = np.linalg.norm(np.diff(uv, axis=0), axis=1) / np.maximum(np.diff(frames), 1)
+    near = np.diff(frames) <= 2                       # consecutive detections (a 1-frame miss between at most)
+    cut = np.flatnonzero(~near | (step > limit)) + 1   # where runs start
+    starts, stops = np.r_[0, cut], np.r_[cut, M]
+    jumped = np.r_[False, near & (step > limit)]       # the run starting here was jumped to
+    longest = max(1, int(round(JUMP_RUN_S * fps)))
+    for i, (a, b) in enumerate(zip(starts, stops)):
+        if b - a > longest or not jumped[a]:
+            continue
+        after_jump = b < M and near[b - 1] and step[b - 1] > limit
+        lost_after = b == M or not near[b - 1]
+        before = stops[i - 1] - starts[i - 1] if i > 0 else 0
+        after = stops[i + 1] - starts[i + 1] if i + 1 < len(starts) else 0
+        if (after_jump or lost_after) and b - a < max(before, after if after_jump else 0):
+            out[a:b] = True
+    return out
 
 
 def net_height(net, point: np.ndarray) -> float:
@@ -1024,7 +1104,15 @@ def solve(problem: Problem, theta: np.ndarray, max_iter: int | None = None) -> S
     sol.iterations += n
     for _ in range(cfg.irls_passes - 1):
         problem.reweight()
-        if np.all(problem.weights == 1.0):
+        if np.all(problem.weights == 1.0) or np.all(problem.weights[~problem.muted] == 1.0):
+            break
+        n = sol.iterations
+        sol = lm(problem, sol.theta, cfg.reweighted_iter, sol.aux["flights"])
+        sol.iterations += n
+    for _ in range(2):  # detections far off the converged fit (a stuck tracker): left out, then refit
+        before = problem.outliers.copy()
+        problem.reweight()
+        if not problem.outliers.any() or np.array_equal(problem.outliers, before):
             break
         n = sol.iterations
         sol = lm(problem, sol.theta, cfg.reweighted_iter, sol.aux["flights"])
