@@ -103,10 +103,53 @@ class Observations:
         return Observations(self.court, self.camera, self.fps, uv, self.event_frames, list(self.event_labels),
                             self.players, self.source, self.pixel_sigma)
 
+    def beyond_edges(self) -> dict[int, int]:
+        """Frames without a 2D ball where the track shows where the ball is: beyond the image edge it left
+        through (a lob above the top, a wide ball off a side) — ``{frame: edge}``, edges :data:`EDGES`.
+
+        A gap of the track whose last point before lies within :data:`EDGE_MARGIN` of an edge, moving towards
+        it, is beyond that edge for its first half; one whose first point after lies near an edge, moving away
+        from it, for its second half (both: the whole gap when they agree).
+        """
+        w, h = (float(v) for v in self.camera.image_size)
+        seen = np.isfinite(self.uv).all(axis=1)
+        out: dict[int, int] = {}
+        m = np.r_[0, (~seen).astype(int), 0]
+        edges = np.flatnonzero(np.diff(m))
+        for a, b in zip(edges[::2], edges[1::2]):   # unobserved frames a .. b-1
+            if a < 2 or b > len(seen) - 2:
+                continue
+            leave = _edge_of(self.uv[a - 1], self.uv[a - 1] - self.uv[a - 2], w, h)
+            enter = _edge_of(self.uv[b], self.uv[b] - self.uv[b + 1], w, h)
+            half = (a + b) // 2
+            if leave is not None:
+                out.update({f: leave for f in range(a, b if enter == leave else half + (b - a) % 2)})
+            if enter is not None and enter != leave:
+                out.update({f: enter for f in range(half, b)})
+        return out
+
     def segments(self) -> list[Segment]:
         """The flights between consecutive events (E-1 segments)."""
         f, lab = self.event_frames, self.event_labels
         return [Segment(i, int(f[i]), int(f[i + 1]), lab[i], lab[i + 1]) for i in range(len(f) - 1)]
+
+
+#: image edges a ball can leave through (:meth:`Observations.beyond_edges`)
+EDGES = ("top", "bottom", "left", "right")
+#: a ball this close to an edge (share of the image height) and moving towards it is leaving the picture
+EDGE_MARGIN = 0.06
+
+
+def _edge_of(uv: np.ndarray, motion: np.ndarray, w: float, h: float) -> int | None:
+    """The index in :data:`EDGES` of the edge that a ball at ``uv`` (px) moving by ``motion`` (px a frame, towards
+    the edge) is about to leave through, or None."""
+    if not (np.isfinite(uv).all() and np.isfinite(motion).all()):
+        return None
+    m = EDGE_MARGIN * h
+    dist = (uv[1], h - uv[1], uv[0], w - uv[0])
+    towards = (motion[1] < 0, motion[1] > 0, motion[0] < 0, motion[0] > 0)
+    near = [k for k in range(4) if dist[k] < m and towards[k]]
+    return min(near, key=lambda k: dist[k]) if near else None
 
 
 #: the 2D noise assumed at 720 lines (px); larger frames scale it (a detector sees a fixed input size)

@@ -473,6 +473,9 @@ class Problem:
         self.outliers = self.jumps.copy()  # detections the fit leaves out (:meth:`find_outliers`)
         self.weights[self.jumps] = 0.0
         self.event_frames = np.array([ct.frame for ct in chain.contacts])
+        beyond = {f: e for f, e in obs.beyond_edges().items() if chain.first_frame <= f <= chain.last_frame}
+        self.beyond_frames = np.array(sorted(beyond), np.int64)
+        self.beyond_edge = np.array([beyond[f] for f in self.beyond_frames], np.int64)
         nets = [p for p in obs.court.planes if p.event == "net"]
         self.net = nets[0] if nets else None
         self._walls = [p for p in obs.court.planes if not p.two_sided and p.event != "ground"
@@ -635,6 +638,7 @@ class Problem:
         if self.physics:
             self._bounces(theta, fl, taus, rows, through)
             self._court(fl, taus, rows, through)
+            self._beyond(fl, taus, rows, through)
         self._net(fl, taus, rows, through)
         self._hits(theta, rows)
         self._free_ends(theta, rows)
@@ -781,6 +785,35 @@ class Problem:
                 return through(own[bad], (dP @ n) / cfg.court_sigma)
 
             rows.add((d[bad] + tol) / cfg.court_sigma, blocks)
+
+    def _beyond(self, fl: Flights, taus: np.ndarray, rows: _Rows, through) -> None:
+        """Hinges keeping the ball beyond the image edge it left through where the track says so
+        (:meth:`~.observations.Observations.beyond_edges`: a lob above the top of the picture): a frame
+        projected inside the picture by more than 2 σ costs its distance past that line (σ units)."""
+        if not len(self.beyond_frames):
+            return
+        cfg = self.cfg
+        own = self.owners(self.beyond_frames, taus)
+        j = self.index(fl, own, self.beyond_frames)
+        pts = fl.P[own, :, j]                                                   # (R, V, 3)
+        pix = self.obs.camera.project(pts.reshape(-1, 3)).reshape(len(j), pts.shape[1], 2)
+        w, h = (float(v) for v in self.obs.camera.image_size)
+        e = self.beyond_edge
+        axis = np.where(e < 2, 1, 0)
+        sign = np.where(e % 2 == 0, 1.0, -1.0)                                   # top/left: inside is +
+        bound = np.where(e == 1, h, np.where(e == 3, w, 0.0))
+        tol = 2.0 * cfg.pixel_sigma
+        coord = pix[np.arange(len(j)), :, axis]                                  # (R, V)
+        inside = sign[:, None] * (coord - bound[:, None]) - tol                   # > 0: inside the picture
+        bad = np.flatnonzero(np.isfinite(inside[:, 0]) & (inside[:, 0] > 0))
+        if not len(bad):
+            return
+
+        def blocks(bad=bad):
+            d = (inside[bad, 1:] - inside[bad, :1]) / EPS[None, :] / cfg.pixel_sigma  # (B, N_IN)
+            return through(own[bad], np.where(np.isfinite(d), d, 0.0))
+
+        rows.add(inside[bad, 0] / cfg.pixel_sigma, blocks)
 
     def _net(self, fl: Flights, taus: np.ndarray, rows: _Rows, through) -> None:
         """Hinge on the ball's height where a flight without a net event crosses the net plane."""
