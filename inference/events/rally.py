@@ -15,11 +15,17 @@ serve (:func:`after_toss`). On a poor track (a tracker's misses and wrong positi
 late candidate and skip the rally's first hits: when the decoded hits hold a run of alternating sides
 (:func:`chain_serve`) and the track's serve comes after the run's second hit, the run's first hit is the serve. Sports whose serve bounces first (padel) keep that bounce in the point.
 
+A clip cut mid-rally has no serve: when its track starts with the ball flying and an event comes at once
+(:func:`starts_in_play`) and the serve found shows no set-up before it (:func:`serve_setup`: held, tossed,
+bounced by the server, a pause), the point starts at the first tracked frame and nothing before the serve
+found is outside it.
+
 The end: with a camera, by the rules where the bounces land on the court (:func:`rule_end`: after a hit
 the ball must first land in the other half, inside the lines; the net, a wall first, out, or a second
 bounce in one half end the point); else the second floor bounce after a hit (not when the camera puts
 the two in opposite halves: a hit was missed between them); else, when the events stop
-(a gap of ``gap_s`` in the track, no event for ``max_flight_s``), where the ball is lost, stands still,
+(a gap of ``gap_s`` in the track — not one above the top of the picture, a lob —, no event for
+``max_flight_s``), where the ball is lost, stands still,
 or ``dead_s`` after the last event. When the decoded hits after that end hold a run of alternating sides
 (:func:`chain_serve`) starting within ``resume_s``, the end was false and the point goes on from the run. Times are in seconds and distances in image heights, so the
 constants hold at 25–60 fps.
@@ -79,6 +85,11 @@ class RallyParams:
             end) or a run of ``chain_hits`` alternating hits starts.
         still_s, still_speed: the ball moving less than ``still_speed`` image heights per second for
             ``still_s`` ends the point.
+        in_play_s, setup_s: a clip whose track starts with the ball flying and an event within ``in_play_s``
+            starts in play (cut mid-rally) unless the serve found shows its set-up in the ``setup_s`` before
+            it (:func:`serve_setup`: the ball held, tossed or bounced by the server, or a pause).
+        edge: a gap of the track that the ball leaves and re-enters through the top of the picture within
+            this share of the image height (a lob) is no loss of the ball.
     """
 
     away_s: tuple[float, float] = (0.3, 0.8)
@@ -115,6 +126,9 @@ class RallyParams:
     resume_s: float = 3.0
     still_s: float = 0.5
     still_speed: float = 0.05
+    in_play_s: float = 1.0
+    setup_s: float = 1.5
+    edge: float = 0.06
 
     @classmethod
     def for_sport(cls, sport: str | None) -> RallyParams:
@@ -138,7 +152,8 @@ class RallySegment:
         inside: ``(N,)`` bool per event given, True for the rally's events.
         serve_source: ``hit`` (a decoded racket hit), ``model`` (a peak of the hit probability the decoder
             dropped), ``track`` (the track's turn), ``chain`` (the first of the decoded hits' alternating run,
-            :func:`chain_serve`) or ``none``.
+            :func:`chain_serve`), ``in_play`` (the clip starts mid-rally: ``start`` is its first tracked
+            frame, no serve) or ``none``.
     """
 
     start: int
@@ -194,7 +209,7 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
     halves are not: a hit between them was missed), or, when the events stop (a gap of
     ``gap_s``, no event for ``max_flight_s``), where the ball is lost, stands still or ``dead_s`` later."""
     T = len(xy)
-    seen = np.isfinite(xy).all(axis=1)
+    seen = np.isfinite(xy).all(axis=1) | above_picture(xy, params.edge)  # a lob above the view is in play
     gap = max(1, int(round(params.gap_s * fps)))
     max_flight = int(round(params.max_flight_s * fps))
     k = int(np.searchsorted(frames, start, side="left"))
@@ -244,6 +259,19 @@ def _bounce_half(land: np.ndarray | None, sides: CourtSides | None, i: int) -> s
     if land is None or sides is None or not np.isfinite(land[i]).all():
         return None
     return sides.side(float(land[i][1]))
+
+
+def above_picture(xy: np.ndarray, edge: float) -> np.ndarray:
+    """``(T,)`` True on the frames of the gaps in the track that the ball leaves and re-enters through the
+    top of the picture (within ``edge`` of it): a lob above the camera's view is still in play."""
+    seen = np.isfinite(xy).all(axis=1)
+    out = np.zeros(len(xy), bool)
+    m = np.r_[0, (~seen).astype(int), 0]
+    edges = np.flatnonzero(np.diff(m))
+    for a, b in zip(edges[::2], edges[1::2]):
+        if 0 < a and b < len(xy) and xy[a - 1, 1] < edge and xy[b, 1] < edge:
+            out[a:b] = True
+    return out
 
 
 def _gap_between(seen: np.ndarray, a: int, b: int, gap: int) -> bool:
@@ -613,6 +641,57 @@ def _servers_warm_up(xy: np.ndarray, frames: np.ndarray, labels: list[str], hits
     return _side_at(xy, frames, labels, hits, start) == label
 
 
+def serve_setup(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels: list[str], hits,
+                aspect: float, params: RallyParams) -> bool:
+    """Whether the ``setup_s`` before a serve found at ``start`` show a serve's set-up: the ball held still
+    or tossed (it rises and falls at one image x), bounced by the server (a floor event with no racket hit
+    between it and the serve), or a pause (the ball unseen or still for most of that time). A rally shot
+    has none of these: the ball arrives from the other side."""
+    a = max(0, start - int(round(params.setup_s * fps)))
+    if start - a < 3:
+        return False
+    p = _scaled(xy, aspect)
+    before = p[a:start]
+    seen = np.isfinite(before).all(axis=1)
+    if seen.mean() < 0.4:
+        return True                                         # a pause: the ball out of sight before the serve
+    if held_still(p, fps, params)[a:start].any():
+        return True
+    _, after = launch_scores(p, fps, params)
+    if any(after_toss(p, fps, t, after, params) is not None for t in range(a, max(a + 1, start - 3))):
+        return True
+    bounced = [f for f, c in zip(frames, labels) if a <= f < start and c == "ground"]
+    hit_between = [f for f, c in zip(frames, labels) if bounced and bounced[-1] < f < start and c in hits]
+    if not bounced or hit_between:
+        return False
+    # the server's bounce falls from the hand; a rally's bounce comes from the other side's shot, fast
+    v = forward_speed(p, fps)
+    typical = np.nanpercentile(v, 75) if np.isfinite(v).any() else np.inf
+    arriving = v[max(0, bounced[-1] - int(round(0.3 * fps))):bounced[-1]]
+    return bool(np.isfinite(arriving).any() and np.nanmax(arriving) < 0.5 * typical)
+
+
+def starts_in_play(xy: np.ndarray, fps: float, frames: np.ndarray, labels: list[str], hits, aspect: float,
+                   params: RallyParams) -> int | None:
+    """The first tracked frame when the clip starts with the ball in play (cut mid-rally: the ball already
+    flies, an event comes within ``in_play_s``, and the first events are a rally's — not two floor bounces
+    without a racket hit between, as a server bouncing the ball), else None."""
+    seen = np.flatnonzero(np.isfinite(xy).all(axis=1))
+    if not len(seen) or not len(frames):
+        return None
+    t0 = int(seen[0])
+    if frames[0] - t0 > params.in_play_s * fps:
+        return None
+    first = [c for c in labels[:3]]
+    if len(first) >= 2 and first[0] == first[1] == "ground":
+        return None
+    p = _scaled(xy, aspect)
+    n = max(2, int(round(params.hold_s * fps)))
+    if held_still(p, fps, params)[t0:t0 + n + 1].any():
+        return None
+    return t0
+
+
 def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=("player_near", "player_far"),
                   aspect: float = 16 / 9, params: RallyParams | None = None,
                   hit_prob: np.ndarray | None = None, camera=None, sides: CourtSides | None = None) -> RallySegment:
@@ -645,6 +724,9 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     if start is None:
         start = int(hit_frames[0]) if len(hit_frames) else (int(frames[0]) if len(frames) else 0)
         source = "hit" if len(hit_frames) else "none"
+    begun = starts_in_play(xy, fps, frames, labels, hits, aspect, params)
+    if begun is not None and begun < start and not serve_setup(xy, fps, start, frames, labels, hits, aspect, params):
+        start, source = begun, "in_play"   # cut mid-rally: no serve in the clip, nothing before it is outside
     land = floor_positions(xy, frames, camera) if camera is not None and sides is not None else None
     end, last = rally_end(xy, fps, start, frames, labels, hits, aspect, params, land, sides)
     while params.chain_hits > 0 and last < len(frames):   # the hits go on alternating: the end was false
@@ -669,8 +751,9 @@ def rally_summary(seg: RallySegment, fps: float, outside_labels, kept: bool) -> 
         counts[str(e)] = counts.get(str(e), 0) + 1
     out = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     n = sum(counts.values())
-    return (f"rally frames {seg.start}–{seg.end} ({seg.start / fps:.2f}–{seg.end / fps:.2f} s, serve from "
-            f"{seg.serve_source}); {n} event{'' if n == 1 else 's'} outside the point" + (f" ({out})" if out else "")
+    how = "the clip starts mid-rally" if seg.serve_source == "in_play" else f"serve from {seg.serve_source}"
+    return (f"rally frames {seg.start}–{seg.end} ({seg.start / fps:.2f}–{seg.end / fps:.2f} s, {how}); "
+            f"{n} event{'' if n == 1 else 's'} outside the point" + (f" ({out})" if out else "")
             + (", kept in events.csv (--rally-only leaves them out)" if kept and counts else
                ", left out of events.csv" if counts else ""))
 

@@ -47,6 +47,7 @@ def test_serve_is_the_hit_after_which_the_ball_stays_away(fps):
 def test_point_ends_at_second_bounce_and_padel_keeps_the_serve_bounce():
     fps = 50.0
     xy = np.tile([0.5, 0.5], (400, 1)).astype(float) + np.linspace(0, 0.3, 400)[:, None]
+    xy[:30] = xy[30]  # held in the server's hand first (a clip that shows the serve's set-up)
     frames = np.array([40, 60, 100, 150, 170, 220, 260])
     labels = ["ground", "player_near", "ground", "player_far", "ground", "ground", "ground"]
     from inference.events.rally import RallyParams

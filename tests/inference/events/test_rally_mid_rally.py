@@ -1,0 +1,69 @@
+"""A clip cut mid-rally has no serve: nothing in it is outside the point unless the point visibly ends, and
+a lob above the picture is no loss of the ball; a clip that shows the serve's set-up keeps its serve."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inference.clipio import Clip
+from inference.events.features import dense_xy
+from inference.events.rally import RallyParams, above_picture, rally_summary, segment_rally
+
+SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
+
+
+def _clip(name: str):
+    clip = Clip(SAMPLE / name)
+    ev = clip.read_events(gt=True)
+    xy = dense_xy(clip.read_ball(), clip.n_frames)
+    return clip, xy, ev.frame, [str(e) for e in ev.event]
+
+
+@pytest.mark.parametrize("name,cut", [("tennis_sample", 20), ("padel_sample", 40), ("padel_sample", 75)])
+def test_a_clip_cut_mid_rally_keeps_every_event_in_the_point(name, cut):
+    """Cut after a racket hit, while the ball flies: the point starts at the clip's first frame, every event
+    to the end of the rally is inside it (the old segmentation took a later hit for the serve and put the
+    events before it outside the point)."""
+    clip, xy, frames, labels = _clip(name)
+    keep = frames >= cut
+    f, lab = frames[keep] - cut, [c for c, k in zip(labels, keep) if k]
+    seg = segment_rally(xy[cut:], clip.info.fps, f, lab, params=RallyParams.for_sport(clip.info.sport))
+    assert seg.serve_source == "in_play" and seg.start == 0
+    assert seg.inside[: len(f) - 1].all()                   # the last may be after the point's end
+    assert "mid-rally" in rally_summary(seg, clip.info.fps, [], True)
+
+
+def test_a_clip_that_shows_the_serve_keeps_it():
+    """The padel sample starts with the server dropping the ball: its serve stays the serve."""
+    clip, xy, frames, labels = _clip("padel_sample")
+    seg = segment_rally(xy, clip.info.fps, frames, labels, params=RallyParams.for_sport("padel"))
+    assert seg.serve_source != "in_play" and abs(seg.start - 28) <= 3
+
+
+def test_bounces_of_the_server_are_no_rally():
+    """Two floor bounces before any racket hit at the start of the track: the server bouncing the ball, not a
+    clip cut mid-rally."""
+    fps = 25.0
+    T = 120
+    t = np.arange(T) / fps
+    xy = np.stack([np.full(T, 0.5), 0.7 + 0.05 * np.abs(np.sin(2.5 * t))], axis=1)   # bounced in place
+    xy[80:] = np.stack([0.5 - 0.004 * np.arange(40), 0.7 - 0.01 * np.arange(40)], axis=1)  # then served
+    seg = segment_rally(xy, fps, np.array([5, 30, 80]), ["ground", "ground", "player_near"],
+                        params=RallyParams.for_sport("tennis"))
+    assert seg.serve_source != "in_play"
+
+
+def test_a_lob_above_the_picture_does_not_end_the_point():
+    """The ball leaves through the top of the picture for 1.2 s (longer than the gap that ends a point) and
+    comes back to bounce and be returned: the point goes on, the events after the lob are inside it."""
+    fps = 25.0
+    T = 120
+    xy = np.full((T, 2), np.nan)
+    xy[:18] = np.stack([np.linspace(0.4, 0.45, 18), np.linspace(0.8, 0.02, 18)], axis=1)    # up and out
+    xy[48:] = np.stack([np.linspace(0.5, 0.6, 72), np.linspace(0.02, 0.8, 72)], axis=1)     # back down
+    assert above_picture(xy, 0.06)[18:48].all() and not above_picture(xy, 0.06)[:18].any()
+    frames, labels = np.array([2, 63, 80]), ["player_near", "ground", "player_far"]
+    seg = segment_rally(xy, fps, frames, labels, params=RallyParams.for_sport("padel"))
+    assert seg.inside.all() and seg.end >= 80
