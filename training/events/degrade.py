@@ -12,7 +12,7 @@ smoother then drops isolated outliers and smooths each piece. :func:`degrade` ap
 1. jitter: Gaussian, σ drawn per clip in ``jitter_px`` (pixels of the clip's frame);
 2. gaps around events: each ``player_near`` hit is hidden with probability ``p_occlude_near`` for
    ``occlude_s`` seconds (the body; the hit at a random place inside the gap), ``player_far`` hits with
-   ``p_occlude_far`` for half as long, and every other event (bounce, wall, net) with ``p_gap_event`` for
+   ``p_occlude_far`` for ``occlude_far_s`` (default half as long), and every other event (bounce, wall, net) with ``p_gap_event`` for
    ``event_gap_s`` — on real tracks the tracker and the smoother's change-point cuts lose the ball at
    most direction changes, so the ball is missing around most events;
 3. random runs of misses of ``miss_run_s`` seconds until ``miss_frac`` of the visible frames are missed
@@ -74,6 +74,9 @@ class DegradeConfig:
         far_miss: probability that a detection above ``far_y`` (normalised image height: the far end,
             where the ball is a few pixels) is missed; top_crop: the image's top ``top_crop`` is out of the
             frame (lobs leaving it). All three are off by default (the default draws are unchanged).
+        occlude_far_s: [min, max] length (s) of the gap around a far hit (None: half of ``occlude_s``); a
+            real broadcast tracker loses the far player's hits for longer than the near one's
+            (``training.events.real_stats``).
     """
 
     enabled: bool = True
@@ -97,6 +100,7 @@ class DegradeConfig:
     far_y: float = 0.45
     top_crop: float = 0.0
     miss_by_diameter: tuple = ()
+    occlude_far_s: tuple | None = None
 
     def __post_init__(self) -> None:
         for name in ("p_clean", "p_occlude_near", "p_occlude_far", "p_gap_event", "miss_frac", "outlier_frac", "p_smooth",
@@ -108,6 +112,8 @@ class DegradeConfig:
             raise ValueError("DegradeConfig.miss_frac and outlier_frac must be below 0.95 (nothing would be left)")
         for name in ("occlude_s", "event_gap_s", "miss_run_s", "outlier_px", "jitter_px"):
             object.__setattr__(self, name, _pair(name, getattr(self, name)))
+        if self.occlude_far_s is not None:
+            object.__setattr__(self, "occlude_far_s", _pair("occlude_far_s", self.occlude_far_s))
         run = _pair("outlier_run", self.outlier_run, lo=1)
         object.__setattr__(self, "outlier_run", (int(run[0]), int(run[1])))
         if self.miss_run_s[0] <= 0:
@@ -166,8 +172,8 @@ def occlusion_mask(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig) -
     other events (the track lost at the direction change)."""
     n = sim.n_frames
     mask = np.zeros(n, bool)
-    hits = {"player_near": (cfg.p_occlude_near, cfg.occlude_s, 1.0),
-            "player_far": (cfg.p_occlude_far, cfg.occlude_s, 0.5)}
+    far = (cfg.occlude_far_s, 1.0) if cfg.occlude_far_s is not None else (cfg.occlude_s, 0.5)
+    hits = {"player_near": (cfg.p_occlude_near, cfg.occlude_s, 1.0), "player_far": (cfg.p_occlude_far, *far)}
     for f, label in zip(sim.events.frame, sim.events.event):
         p, span, scale = hits.get(str(label), (cfg.p_gap_event, cfg.event_gap_s, 1.0))
         if p <= 0 or rng.random() >= p:
