@@ -416,7 +416,7 @@ def clip_figures(clip, report) -> dict:
         return out
     seg = json.loads(clip.segments_path.read_text())
     b3 = clip.read_ball_3d()
-    limit = rms_limit_px()
+    limit = seg.get("plausibility", {}).get("rms_limit_px") or rms_limit_px()  # the clip's measured 2D noise
     by_index = {}
     for s in seg["segments"]:
         by_index.setdefault(int(s["index"]), []).append(s)
@@ -457,8 +457,27 @@ def clip_figures(clip, report) -> dict:
         "reconstructed_without_rows": empty,
         "plausible": pl.get("plausible"), "not_plausible_because": pl.get("not_plausible_because", []),
         "frames_inside_court": pl.get("frames_inside_court"), "flags": pl.get("flags", []),
+        "covered_share": pl.get("covered_share"),
     }
+    out["review"] = review_calls(clip)
     return out
+
+
+def review_calls(clip) -> dict:
+    """What the review says of the clip: line calls made, how many come from a shot whose 3D failed (must be
+    0), and the banner's first words."""
+    try:
+        from labeler.review.shots import analyse_clip
+    except ImportError as e:  # the review is an optional room of the project
+        return {"error": str(e)}
+    try:
+        a = analyse_clip(clip)
+    except Exception as e:  # noqa: BLE001 - a figure of the bench, not a crash of it
+        return {"error": f"{type(e).__name__}: {e}"}
+    calls = [(s, b) for s in a.shots for b in s.bounces if b.call in ("in", "out", "fault")]
+    return {"shots": len(a.shots), "calls": len(calls),
+            "calls_from_failed_3d": sum(bool(getattr(s, "no_3d", "")) for s, _ in calls),
+            "shots_without_3d": sum(bool(getattr(s, "no_3d", "")) for s in a.shots)}
 
 
 def racket_contacts(seg: dict, clip) -> list[dict]:
@@ -550,6 +569,10 @@ def tennis_clips(real: Path, table: Table, args) -> dict:
                   f"{rc['event_span'][0]}–{rc['event_span'][1]} (first to last event) with plausible 3D "
                   f"({100 * rc['share_any_3d']:.0f} % with any row); pipeline verdict: {verdict}; frames "
                   f"inside the court {rc['frames_inside_court']}")
+        rv = fig.get("review", {})
+        table.add(part, f"{v.stem}: review", more=rv.get("error") or (
+            f"{rv['shots']} shots, {rv['shots_without_3d']} without 3D; {rv['calls']} line calls, "
+            f"{rv['calls_from_failed_3d']} from a shot without plausible 3D"))
     return out
 
 

@@ -472,6 +472,7 @@ def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None)
     }
     if rms_limit_px:
         out["flights_over_rms_limit"] = over
+        out["rms_limit_px"] = round(float(rms_limit_px), 2)
     # failed flights count too: a rally of which a third could not be reconstructed is no plausible replay
     failed, n = len(fit.segments) - len(ok), len(fit.segments)
     out["failed_share"] = round(failed / n, 4) if n else 0.0
