@@ -299,21 +299,13 @@ def _gap_frames(obs: Observations, first: int, last: int, min_gap: int = 3) -> l
 def _gap_beside(obs: Observations, frame: int, reach: int = 3, min_gap: int = 3) -> int | None:
     """The middle of a gap of at least ``min_gap`` frames that ends or starts within ``reach`` frames of
     ``frame`` (the contact was timed where the ball reappeared), or None."""
+    from inference.events.gaps import gap_around
+
     seen = np.isfinite(obs.uv).all(axis=1)
-    T = len(seen)
-    for d in range(0, reach + 1):
-        for g in (frame - d, frame + d):
-            if not (0 < g < T - 1) or seen[g]:
-                continue
-            a = g
-            while a > 0 and not seen[a - 1]:
-                a -= 1
-            b = g
-            while b < T - 1 and not seen[b + 1]:
-                b += 1
-            if b - a + 1 >= min_gap and a > 0 and b < T - 1:
-                return (a + b) // 2
-    return None
+    g = gap_around(seen, frame, reach)
+    if g is None or g[1] - g[0] + 1 < min_gap or g[0] == 0 or g[1] == len(seen) - 1:
+        return None
+    return (g[0] + g[1]) // 2
 
 
 def _side_label(fit: ChainFit, frame: int) -> str:

@@ -17,21 +17,21 @@ from inference.pipeline.prepare import Cut, prepare, video_notes
 BITS = 8
 
 
-def numbered(index: int, w: int = 320, h: int = 192) -> np.ndarray:
+def numbered(index: int, w: int = 320, h: int = 192, bits: int = BITS) -> np.ndarray:
     """A frame whose top half shows ``index`` in binary as white bars (robust to compression)."""
     img = np.full((h, w, 3), 30, np.uint8)
-    bar = w // BITS
-    for bit in range(BITS):
+    bar = w // bits
+    for bit in range(bits):
         if index >> bit & 1:
             img[: h // 2, bit * bar:(bit + 1) * bar] = 235
     img[h // 2:, :, 0] = 180  # red bottom half: RGB order
     return img
 
 
-def number_of(img: np.ndarray) -> int:
+def number_of(img: np.ndarray, bits: int = BITS) -> int:
     h, w = img.shape[:2]
-    bar = w // BITS
-    return sum(1 << b for b in range(BITS) if img[4:h // 2 - 4, b * bar + 4:(b + 1) * bar - 4].mean() > 127)
+    bar = w // bits
+    return sum(1 << b for b in range(bits) if img[4:h // 2 - 4, b * bar + 4:(b + 1) * bar - 4].mean() > 127)
 
 
 def write_pyav(path, frames, *, fmt, codec="libx264", rate=30, pts_ms=None, options=None) -> None:

@@ -16,6 +16,8 @@ from inference.clipio import FrameSource
 from inference.clipio.probe import nominal_rate, probe_video_file, standard_rate
 from inference.pipeline.prepare import Cut, prepare, video_notes
 
+import test_video_inputs as inputs  # noqa: E402 - the numbered frames (tests/ is on the path)
+
 BITS = 9
 SLOTS = 120  # 4.8 s at 25 fps
 MISSING = [5, 17, 18, 40, 41, 42, 77, 100]  # dropped by the recorder: one, two and three in a row
@@ -25,19 +27,11 @@ STRAY_NUMBER = 500
 
 def numbered(index: int, w: int = 320, h: int = 192) -> np.ndarray:
     """A frame showing ``index`` in binary as white bars on its top half (robust to compression)."""
-    img = np.full((h, w, 3), 30, np.uint8)
-    bar = w // BITS
-    for bit in range(BITS):
-        if index >> bit & 1:
-            img[: h // 2, bit * bar:(bit + 1) * bar] = 235
-    img[h // 2:, :, 0] = 180
-    return img
+    return inputs.numbered(index, w, h, bits=BITS)
 
 
 def number_of(img: np.ndarray) -> int:
-    h, w = img.shape[:2]
-    bar = w // BITS
-    return sum(1 << b for b in range(BITS) if img[4:h // 2 - 4, b * bar + 4:(b + 1) * bar - 4].mean() > 127)
+    return inputs.number_of(img, bits=BITS)
 
 
 def recorded() -> list[tuple[float, int]]:
