@@ -59,6 +59,10 @@ PLAYERS_OPTIONAL = frozenset({"tennis", "padel"})
 KINDS = ("hitnet", "physics", "crop", "tagger")
 
 
+#: events whose class probability on their frame is below this are reported for a check (:meth:`EventResult.unsure`)
+UNSURE_BELOW = 0.5
+
+
 @dataclass
 class EventResult:
     """Output of :meth:`EventDetector.predict`.
@@ -97,6 +101,19 @@ class EventResult:
             if len(v) == n:
                 extra[name] = np.array(["" if not np.isfinite(x) else f"{x:.2f}" for x in v], dtype=object)
         return HitEvents(self.events.frame, self.events.event, extra)
+
+    def unsure(self, below: float = UNSURE_BELOW) -> str:
+        """``"2 events below 0.5 confidence: ground 46 (0.41), player_far 60 (0.38)"`` — the events a reviewer
+        should check, reported rather than hidden ("" when none or the model gives no confidence)."""
+        c = np.asarray(self.confidence, np.float64)
+        if len(c) != len(self.events):
+            return ""
+        low = np.flatnonzero(np.isfinite(c) & (c < below))
+        if not len(low):
+            return ""
+        items = ", ".join(f"{self.events.event[k]} {int(self.events.frame[k])} ({c[k]:.2f})" for k in low[:8])
+        more = f", +{len(low) - 8} more" if len(low) > 8 else ""
+        return f"{len(low)} event{'s' if len(low) > 1 else ''} below {below:g} confidence: {items}{more}"
 
 
 def default_weights(sport: str) -> Path:

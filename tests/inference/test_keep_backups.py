@@ -232,3 +232,4 @@ def test_calibrate_refuses_collinear_clicks(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 1 and "Nothing written" in err and "focal length" in err
     assert (clip / "camera.yaml").read_text() == mine and not _backups(clip, "camera.yaml")
+

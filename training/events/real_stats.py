@@ -84,7 +84,7 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     out["visible"] = int(seen[a:b].sum())
     out["jitter"] = _jitter_px(xy[a:b])
     p = xy[a:b][seen[a:b]]
-    out["integer"] = [bool(np.allclose(p, np.round(p), atol=1e-6))] if len(p) else []
+    out["integer"] = [bool(np.allclose(p, np.round(p), atol=1e-3))] if len(p) else []
     return out
 
 
