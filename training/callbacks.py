@@ -76,14 +76,14 @@ class SafeCheckpoint(Callback):
             self.save(trainer, f"step {step}")
 
     def on_train_epoch_end(self, trainer, pl_module) -> None:
-        self.save(trainer, f"end of epoch {trainer.current_epoch}")
+        self.save(trainer, f"end of {epoch_of(trainer)}")
 
     def on_exception(self, trainer, pl_module, exception: BaseException) -> None:
         why = "interrupted" if isinstance(exception, KeyboardInterrupt) else f"{type(exception).__name__}"
         path = self.save(trainer, why)
         if path is not None:
-            log.warning("%s at epoch %d, step %d: saved %s — resume with ckpt_path=%s (or ckpt_path=last)",
-                        why, trainer.current_epoch, trainer.global_step, path, path)
+            log.warning("%s at %s, step %d: saved %s — resume with ckpt_path=%s (or ckpt_path=last)",
+                        why, epoch_of(trainer), trainer.global_step, path, path)
 
     # ------------------------------------------------------------------------------------ SIGTERM
     def setup(self, trainer, pl_module, stage: str) -> None:
@@ -95,6 +95,13 @@ class SafeCheckpoint(Callback):
         if self._old_handler is not None:
             signal.signal(signal.SIGTERM, self._old_handler)
             self._old_handler = None
+
+
+def epoch_of(trainer) -> str:
+    """``epoch 2/30``: the epoch under way, counted from 1 (Lightning's ``current_epoch`` counts from 0), out of
+    ``max_epochs`` when there is a limit; the one numbering of every line the callbacks write."""
+    limit = trainer.max_epochs
+    return f"epoch {trainer.current_epoch + 1}" + (f"/{limit}" if limit is not None and limit > 0 else "")
 
 
 def _raise_keyboard_interrupt(signum, frame):  # noqa: ARG001 - a signal handler's signature
@@ -152,7 +159,7 @@ class ProgressLog(Callback):
     def on_train_epoch_end(self, trainer, pl_module) -> None:
         metrics = {k: float(v) for k, v in trainer.callback_metrics.items() if k.startswith("val/")}
         shown = ", ".join(f"{k} {v:.4f}" for k, v in sorted(metrics.items()))
-        self._emit(f"epoch {trainer.current_epoch + 1}/{trainer.max_epochs} done after "
+        self._emit(f"{epoch_of(trainer)} done after "
                    f"{_duration(time.monotonic() - self._t0)}" + (f": {shown}" if shown else ""))
 
     def _line(self, trainer, batch, batch_idx: int) -> str:
@@ -165,7 +172,7 @@ class ProgressLog(Callback):
         left_run = (total - done) * per_step if math.isfinite(total) else float("nan")
         loss = f"loss {self.losses[-1]:.4g} (mean {sum(self.losses) / len(self.losses):.4g})" if self.losses else "loss ?"
         speed = f"{per_step:.2f} s/step" + (f", {n_batch / per_step:.1f} samples/s" if n_batch and per_step else "")
-        return (f"epoch {trainer.current_epoch + 1}/{trainer.max_epochs} · step {batch_idx + 1}/{per_epoch} "
+        return (f"{epoch_of(trainer)} · step {batch_idx + 1}/{per_epoch} "
                 f"(total {done}/{total if math.isfinite(total) else '?'}) · {loss} · {speed} · "
                 f"ETA epoch {_duration(left_epoch)}, run {_duration(left_run)}")
 

@@ -89,8 +89,12 @@ def infer_manifest(root: str | Path, seed: int = 0, fractions: Sequence[float] =
 def resolve_source(root: str | Path, seed: int = 0, fractions: Sequence[float] = FRACTIONS,
                    weight: float | None = None) -> DataSource:
     """A :class:`DataSource` for a dataset folder (manifest.yaml), a manifest.yaml itself (e.g. one a run saved,
-    :func:`save_inferred`) or a folder of clip folders."""
+    :func:`save_inferred`) or a folder of clip folders; never a folder ``rally3d synth`` left unfinished
+    (FileNotFoundError naming it and the fix)."""
+    from training.preflight import refuse_unfinished
+
     root = Path(root)
+    refuse_unfinished(root)
     if (root / "manifest.yaml").is_file() or is_manifest_file(root):
         manifest = Manifest.load(root)
         return DataSource(manifest.root, manifest, False, weight)

@@ -9,16 +9,35 @@
 
 Outside a process group every function is the identity (one process: nothing to reduce).
 
+The metrics logged from these global counts are equal on every rank, so Lightning's advice to log them with
+``sync_dist=True`` does not apply: :func:`quiet_sync_dist_advice` silences it for them (:data:`GLOBAL_METRICS`)
+and for no other metric.
+
 Example:
     >>> counts = all_reduce_sum(np.array([tp, fp, fn]))   # global counts on every rank
 """
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sized
 
 import numpy as np
 import torch
 from torch.utils.data import DistributedSampler, Sampler
+
+
+GLOBAL_METRICS = r"(val|test)/(precision|recall|f1|f1_best|accuracy|acc|ap|rmse_px|tp|fp1|fp2|fn|tn)"
+"""The epoch metrics the modules compute from :func:`all_reduce_sum` counts (detectors'
+``training.detection.module``, hit events' ``log_event_metrics``) and log without ``sync_dist``."""
+
+
+def quiet_sync_dist_advice() -> None:
+    """Silence Lightning's "It is recommended to use ``self.log(NAME, ..., sync_dist=True)``" warning for
+    :data:`GLOBAL_METRICS` (already global: a second reduction adds nothing); any other metric still warns."""
+    from lightning.fabric.utilities.warnings import PossibleUserWarning
+
+    warnings.filterwarnings("ignore", message=rf"It is recommended to use `self\.log\('{GLOBAL_METRICS}',",
+                            category=PossibleUserWarning)
 
 
 def world() -> tuple[int, int]:
@@ -86,4 +105,5 @@ def eval_sampler(trainer, base) -> Sampler | None:
     return EvalShard(base, trainer.global_rank, trainer.world_size)
 
 
-__all__ = ["EvalShard", "all_gather_concat", "all_reduce_sum", "eval_sampler", "world"]
+__all__ = ["GLOBAL_METRICS", "EvalShard", "all_gather_concat", "all_reduce_sum", "eval_sampler", "quiet_sync_dist_advice",
+           "world"]

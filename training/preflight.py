@@ -3,9 +3,11 @@ on a fresh clone either makes its small default dataset or stops at once with on
 
 ``python train.py +experiment=wasb_padel`` reads ``data.root`` (default ``data/synth_padel``):
 
-- it exists (a dataset folder with ``manifest.yaml``, or clip folders): go on;
-- it is a default dataset of :data:`DEFAULT_DATASETS` and ``auto_data`` is true (the default): it is
-  generated now, with a progress bar, after a line saying what and about how long;
+- it exists (a dataset folder with ``manifest.yaml``, or clip folders): go on; a default dataset of
+  :data:`DEFAULT_DATASETS` only when finished (``manifest.yaml``, no marker of an interrupted generation), and
+  no folder that ``rally3d synth`` left unfinished (Ctrl-C) is ever read as a dataset;
+- it is a default dataset of :data:`DEFAULT_DATASETS`, missing or unfinished, and ``auto_data`` is true (the
+  default): it is generated (or resumed) now, with a progress bar, after a line saying what and about how long;
 - otherwise: :class:`SystemExit` with one line: the folder and the exact ``rally3d synth`` command (or
   how to point ``data.root`` elsewhere).
 
@@ -20,6 +22,8 @@ import shlex
 import time
 from pathlib import Path
 
+import yaml
+
 #: The small default datasets the experiments read (the README's command), by folder name.
 DEFAULT_DATASETS = {
     "synth_padel": {"sport": "padel", "clips": 24, "seed": 10, "max_frames": 300},
@@ -27,6 +31,43 @@ DEFAULT_DATASETS = {
 }
 #: Frames per second ``rally3d synth`` renders on a 2-core CPU (measured: 6,194 frames in 4 min 15 s).
 SYNTH_FPS_2CORE = 24.0
+
+
+PARTIAL = ".synth_partial.yaml"
+"""The marker of a generation in progress in a dataset folder (``training.synth.generate.generate_dataset``):
+written before the first clip, removed after ``manifest.yaml``. A folder holding it is unfinished: it is never
+read as a dataset, and generating it again resumes it."""
+
+
+def unfinished_generation(out: str | Path) -> str | None:
+    """What an interrupted ``generate_dataset`` left in ``out``, in words (``an unfinished `rally3d synth
+    --sport padel --clips 24 --seed 10` (3 of 24 clips made, no manifest.yaml)``); None when it left nothing."""
+    state = read_marker(Path(out))
+    if state is None:
+        return None
+    plan = state.get("plan") or {}
+    return (f"an unfinished `{state.get('source', 'rally3d synth')}` ({len(state.get('done') or {})} of "
+            f"{plan.get('n_clips', '?')} clips made, no manifest.yaml)")
+
+
+def refuse_unfinished(out: str | Path) -> None:
+    """Raise :class:`FileNotFoundError` naming ``out`` and the fix when it is an unfinished generation."""
+    why = unfinished_generation(out)
+    if why:
+        raise FileNotFoundError(f"{out} is {why}: it is not a dataset until it is finished — run the same generation "
+                                f"again into {out} (it resumes where it stopped), or delete the folder")
+
+
+def read_marker(out: Path) -> dict | None:
+    """The :data:`PARTIAL` marker of ``out`` (an unreadable one counts as a marker without clips)."""
+    path = out / PARTIAL
+    if not path.is_file():
+        return None
+    try:
+        state = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        state = None
+    return state if isinstance(state, dict) else {}
 
 
 def synth_command(root: str | Path, spec: dict) -> str:
@@ -73,27 +114,54 @@ def check_data(cfg, generate=None) -> list[str]:
     returns the roots generated."""
     made = []
     for root in data_roots(cfg):
-        if dataset_exists(root):
-            continue
         name = Path(root).name
         spec = DEFAULT_DATASETS.get(name)
         default_dir = Path(str(cfg.paths.data_dir)) / name if cfg.get("paths") else None
-        is_default = spec is not None and default_dir is not None and Path(root).resolve() == default_dir.resolve()
-        if is_default and cfg.get("auto_data", True):
+        if spec is not None and default_dir is not None and Path(root).resolve() == default_dir.resolve():
+            why = default_dataset_state(root)
+            if why is None:
+                continue
+            if not cfg.get("auto_data", True):
+                raise SystemExit(f"{_shown(root)} {why}: make it with `{synth_command(root, spec)}` "
+                                 f"(about {_minutes(spec)} on a 2-core CPU)")
             (generate or generate_default)(root, spec)
             made.append(root)
             continue
-        if spec is not None:
-            raise SystemExit(f"no dataset at {_shown(root)}: make it with `{synth_command(root, spec)}` "
-                             f"(about {_minutes(spec)} on a 2-core CPU)")
-        raise SystemExit(f"no dataset at {_shown(root)} (no manifest.yaml, no clip folders): pass data.root=DIR, a "
-                         f"folder of clip folders as rally3d label writes them, or make synthetic clips with "
-                         f"`{synth_command('data/synth_padel', DEFAULT_DATASETS['synth_padel'])}`")
+        try:
+            refuse_unfinished(root)
+        except FileNotFoundError as e:
+            raise SystemExit(str(e)) from None
+        if not dataset_exists(root):
+            raise SystemExit(f"no dataset at {_shown(root)} (no manifest.yaml, no clip folders): pass data.root=DIR, "
+                             f"a folder of clip folders as rally3d label writes them, or make synthetic clips with "
+                             f"`{synth_command('data/synth_padel', DEFAULT_DATASETS['synth_padel'])}`")
     key = _checked_key(cfg)
     if key not in _CHECKED:  # train.py checks before importing torch, run.train again for API callers: once
         check_clips(cfg)
         _CHECKED.add(key)
     return made
+
+
+def default_dataset_state(root: str | Path) -> str | None:
+    """Why a default dataset folder must be made (``does not exist``, ``is an unfinished …``, ``holds 3 generated
+    clip folders but no manifest.yaml …``); None when it is finished, or holds clips a person made (read as they are)."""
+    from training.synth.cli import check_out_folder
+
+    root = Path(root)
+    if not root.exists():
+        return "does not exist"
+    why = unfinished_generation(root)
+    if why:
+        return f"is {why}"
+    if (root / "manifest.yaml").is_file():
+        return None
+    clips = list(root.glob("*/clip.yaml"))
+    try:
+        check_out_folder(root)  # a clip rally3d synth did not make: a person's folder, read as it is
+    except ValueError:
+        return None
+    return (f"holds {len(clips)} generated clip folders but no manifest.yaml (an interrupted generation)" if clips
+            else "holds no dataset")
 
 
 #: the data settings whose clips :func:`check_clips` already passed in this process
@@ -173,14 +241,16 @@ def _minutes(spec: dict) -> str:
 
 
 def generate_default(root: str | Path, spec: dict) -> None:
-    """Generate a default dataset with a progress bar (what ``rally3d synth`` does)."""
+    """Generate a default dataset with a progress bar (what ``rally3d synth`` does); an unfinished one is
+    resumed (``generate_dataset``)."""
     from tqdm import tqdm
 
     from training.synth.generate import SynthConfig, generate_dataset
 
-    print(f"{_shown(root)} does not exist: generating the default dataset now — {spec['clips']} {spec['sport']} "
-          f"clips of up to {spec['max_frames']} frames, about {_minutes(spec)} on a 2-core CPU "
-          f"(same as `{synth_command(root, spec)}`; Ctrl-C stops, auto_data=false skips this)", flush=True)
+    print(f"{_shown(root)} {default_dataset_state(root) or 'is made again'}: generating the default dataset now — "
+          f"{spec['clips']} {spec['sport']} clips of up to {spec['max_frames']} frames, about {_minutes(spec)} on a "
+          f"2-core CPU (same as `{synth_command(root, spec)}`; Ctrl-C stops, running again resumes, auto_data=false "
+          "skips this)", flush=True)
     t0 = time.perf_counter()
     frames = [0]
     tty = os.isatty(2)

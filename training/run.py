@@ -62,15 +62,11 @@ def log_hyperparameters(cfg: DictConfig, model, trainer) -> dict[str, Any]:
     if not trainer.loggers:
         return {}
 
-    def plain(node):
-        try:
-            return OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
-        except Exception:  # noqa: BLE001 - an interpolation only Hydra's runtime can resolve
-            return OmegaConf.to_container(node, resolve=False)
+    from training.results import resolved
 
-    hp: dict[str, Any] = {k: plain(cfg.get(k)) for k in ("task_name", "tags", "seed", "data", "model", "trainer",
-                                                         "callbacks", "ckpt_path", "init_weights", "task",
-                                                         "optimized_metric") if k in cfg}
+    hp: dict[str, Any] = {k: resolved(cfg.get(k)) for k in ("task_name", "tags", "seed", "data", "model", "trainer",
+                                                            "callbacks", "ckpt_path", "init_weights", "task",
+                                                            "optimized_metric") if k in cfg}
     hp["experiment"] = current_experiment()
     params = list(model.parameters())
     hp["model/params/total"] = sum(p.numel() for p in params)
@@ -104,8 +100,36 @@ def optimized_metric(cfg: DictConfig, metrics: dict[str, float]) -> float | None
     return None
 
 
+def one_line_per_record() -> None:
+    """Lightning's loggers print through their own console handler *and* propagate to the root logger; when
+    the root has handlers (Hydra's console and ``train.log``), theirs are removed so that every record is
+    written once (with Hydra's format, to the console and the log file)."""
+    if not logging.getLogger().handlers:
+        return  # no root handler (an API caller): Lightning's own handler is the only one printing
+    for name in ("lightning", "lightning.pytorch", "lightning.fabric"):
+        lightning_log = logging.getLogger(name)
+        for handler in [h for h in lightning_log.handlers if type(h) is logging.StreamHandler]:
+            lightning_log.removeHandler(handler)
+        lightning_log.propagate = True
+
+
+def with_progress(callbacks: list, cfg: DictConfig) -> list:
+    """Progress in every mode: without Lightning's bar (a log file), ProgressLog's lines, also when the config
+    has no callbacks (``debug=…``, ``callbacks=none``)."""
+    from training.callbacks import ProgressLog
+
+    bar = cfg.trainer.get("enable_progress_bar", progress_bar(cfg))
+    if not bar and not any(isinstance(c, ProgressLog) for c in callbacks):
+        callbacks.append(ProgressLog())
+    return callbacks
+
+
 def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.Trainer]:
+    from training.distributed import quiet_sync_dist_advice
+
     apply_debug(cfg)
+    one_line_per_record()
+    quiet_sync_dist_advice()
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
     datamodule = hydra.utils.instantiate(cfg.data, _convert_="all")  # plain lists: checkpoints load weights_only
@@ -118,7 +142,7 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
     if cfg.get("task") != "events" and init_source(cfg):
         init_detector(model, init_source(cfg), cfg)
     kw = {"enable_progress_bar": progress_bar(cfg)} if "enable_progress_bar" not in cfg.trainer else {}
-    trainer = hydra.utils.instantiate(cfg.trainer, callbacks=instantiate_group(cfg.get("callbacks")),
+    trainer = hydra.utils.instantiate(cfg.trainer, callbacks=with_progress(instantiate_group(cfg.get("callbacks")), cfg),
                                       logger=instantiate_group(cfg.get("logger")) or False, **kw)
     log_hyperparameters(cfg, model, trainer)
     return datamodule, model, trainer

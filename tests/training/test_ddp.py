@@ -177,6 +177,7 @@ def _run_ddp(overrides: list[str], run: Path) -> None:
     cmd = [sys.executable, str(ROOT / "train.py"), *overrides, "trainer=ddp_sim", f"hydra.run.dir={run}"]
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1500)
     assert out.returncode == 0, (out.stdout[-3000:], out.stderr[-5000:])
+    assert "It is recommended to use `self.log(" not in out.stderr, out.stderr[-5000:]  # no advice that does not apply
     return out
 
 

@@ -140,7 +140,8 @@ def test_progress_lines_say_step_loss_speed_and_eta(tiny_padel, tmp_path, monkey
     assert (tmp_path / "run" / "checkpoints" / "last.ckpt").is_file()  # every epoch end, validation or not
 
 
-def test_an_exception_mid_epoch_leaves_last_ckpt_at_the_step_reached(tiny_padel, tmp_path, monkeypatch):
+def test_an_exception_mid_epoch_leaves_last_ckpt_at_the_step_reached(tiny_padel, tmp_path, monkeypatch, caplog):
+    """… and says so counting epochs as the progress lines do (from 1)."""
     import lightning as L
 
     import training.run as run
@@ -158,9 +159,12 @@ def test_an_exception_mid_epoch_leaves_last_ckpt_at_the_step_reached(tiny_padel,
         return dm, model, trainer
 
     monkeypatch.setattr(run, "build", with_boom)
-    cfg = compose_cfg(["+experiment=wasb_padel", "trainer.max_epochs=1", "trainer.limit_train_batches=50",
+    cfg = compose_cfg(["+experiment=wasb_padel", "trainer.max_epochs=2", "trainer.limit_train_batches=50",
                        "trainer.limit_val_batches=1", "test=false", "callbacks.last_checkpoint.every_n_minutes=null",
                        *small_detector(tiny_padel, tmp_path / "cache")], tmp_path / "run")
-    with pytest.raises(RuntimeError, match="injected"):
+    with caplog.at_level("INFO", logger="training.callbacks"), pytest.raises(RuntimeError, match="injected"):
         run.train(cfg)
     assert _step_of(tmp_path / "run" / "checkpoints" / "last.ckpt") == 3
+    said = [r.getMessage() for r in caplog.records if r.name == "training.callbacks"]
+    assert any(m.startswith("epoch 1/2 · step 3/") for m in said), said
+    assert any(m.startswith("RuntimeError at epoch 1/2, step 3: saved ") for m in said), said

@@ -9,17 +9,23 @@ Example:
 """
 from __future__ import annotations
 
+import os
+import shutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from inference.camera import Camera
-from inference.clipio import BallTrack, Clip, ClipInfo, Manifest, ManifestEntry, PlayerTracks, write_video
+from inference.clipio import (BallTrack, Clip, ClipInfo, Manifest, ManifestEntry, PlayerTracks, atomic_write_text,
+                              write_video)
 from inference.clipio.frames import write_frames_folder
 from inference.court import Court, load_court
 from inference.skeleton import COCO17
+
+from training.preflight import PARTIAL, read_marker
 
 from .bodies import PlayerPose, articulate
 from .cameras import CameraSpec
@@ -246,6 +252,10 @@ def _plain(d):
     return d
 
 
+PARTIAL_DIR = ".partial"
+"""The hidden folder a clip is rendered into before it is moved into place, complete."""
+
+
 def generate_dataset(out: str | Path, n_clips: int, seed: int = 0, config: SynthConfig | None = None,
                      fractions: tuple[float, float, float] = (0.8, 0.1, 0.1),
                      progress: Callable[[int, ClipSummary], None] | None = None) -> Manifest:
@@ -254,25 +264,71 @@ def generate_dataset(out: str | Path, n_clips: int, seed: int = 0, config: Synth
     Clip ``k`` uses seed ``seed * 100003 + k``: the dataset is reproducible and its clips independent.
     Splits are assigned in proportion to ``fractions`` over a seeded permutation, so small datasets
     still get every split.
+
+    Never mistaken for a finished dataset when interrupted (Ctrl-C, a crash): the :data:`PARTIAL` marker is
+    written first and removed after ``manifest.yaml`` (an earlier manifest is removed at the start); each clip
+    is rendered in a hidden folder and moved into place complete. Run again with the same arguments, it
+    resumes (the clips made are kept, with a line saying so); with other arguments it makes every clip again.
     """
     config = config or SynthConfig()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    source = f"rally3d synth --sport {config.sport} --clips {n_clips} --seed {seed}"
+    plan = _plain({"n_clips": n_clips, "seed": seed, "fractions": list(fractions), "config": asdict(config)})
+    done = _resumable(out, plan)
+    _mark(out, source, plan, done)
+    (out / "manifest.yaml").unlink(missing_ok=True)
     splits = split_assignment(n_clips, fractions, np.random.default_rng(seed))
     entries = []
     for k in range(n_clips):
         name = f"clip_{k:04d}"
-        summary = generate_clip(out / name, seed * 100003 + k, config)
-        clip = Clip(out / name)
-        clip.write_info(replace(clip.info, split=splits[k]))
+        if name not in done:
+            done[name] = _plain(asdict(_clip_into_place(out, name, seed * 100003 + k, config, splits[k])))
+            _mark(out, source, plan, done)
         entries.append(ManifestEntry(name, splits[k]))
         if progress:
-            progress(k + 1, summary)
-    manifest = Manifest(out, entries, name=out.name, sport=config.sport,
-                        source=f"rally3d synth --sport {config.sport} --clips {n_clips} --seed {seed}",
+            progress(k + 1, ClipSummary(**{**done[name], "size": tuple(done[name]["size"])}))
+    manifest = Manifest(out, entries, name=out.name, sport=config.sport, source=source,
                         extra={"synth_config": _plain(asdict(config))})
     manifest.save()
+    (out / PARTIAL).unlink()
+    shutil.rmtree(out / PARTIAL_DIR, ignore_errors=True)
     return manifest
+
+
+def _mark(out: Path, source: str, plan: dict, done: dict[str, dict]) -> None:
+    atomic_write_text(out / PARTIAL, yaml.safe_dump({"source": source, "plan": plan, "done": done}, sort_keys=False))
+
+
+def _resumable(out: Path, plan: dict) -> dict[str, dict]:
+    """The clips (name → summary) an interrupted generation of the same ``plan`` made in ``out``, with a
+    line saying what is resumed or redone; {} when there is nothing to resume."""
+    state = read_marker(out)
+    if state is None:
+        return {}
+    if state.get("plan") != plan:
+        print(f"{out}: an interrupted generation with other settings was here: making every clip again", flush=True)
+        return {}
+    done = {n: s for n, s in (state.get("done") or {}).items() if (out / n / "clip.yaml").is_file()}
+    print(f"{out}: resuming an interrupted generation: {len(done)} of {plan['n_clips']} clips already made",
+          flush=True)
+    return done
+
+
+def _clip_into_place(out: Path, name: str, seed: int, config: SynthConfig, split: str) -> ClipSummary:
+    """Render clip ``name`` in :data:`PARTIAL_DIR`, then move it, complete, to ``out/name`` (replacing it)."""
+    tmp, final = out / PARTIAL_DIR / name, out / name
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        summary = generate_clip(tmp, seed, config)
+        clip = Clip(tmp)
+        clip.write_info(replace(clip.info, split=split))
+        if final.exists():
+            shutil.rmtree(final)
+        os.replace(tmp, final)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return replace(summary, path=str(final))
 
 
 def split_assignment(n: int, fractions: tuple[float, float, float], rng: np.random.Generator) -> list[str]:
