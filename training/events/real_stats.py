@@ -49,7 +49,7 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     n = int(max(track.frame.max() + 1 if len(track) else 0, events.frame.max() + 1 if len(events) else 0))
     out = {"hidden": {c: [] for c in CLASSES}, "gap_s": {c: [] for c in CLASSES}, "where": {c: [] for c in CLASSES},
            "other_runs_s": [], "seconds": 0.0, "visible": 0, "missed_other": 0, "jitter": [], "integer": [],
-           "gaps": 0, "top_gaps": 0}
+           "gaps": 0, "top_gaps": 0, "top_gap_s": []}
     if not len(events) or not n:
         return out
     dense = track.dense(n)
@@ -77,6 +77,8 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
             above = xy[s - 1, 1] < top * height and xy[e, 1] < top * height
             out["top_gaps"] += int(above)
             out["top_frames"] += (e - s) * int(above)
+            if above:
+                out["top_gap_s"].append((e - s) / fps)
         if not near_event[s:e].any():
             out["other_runs_s"].append((e - s) / fps)
             out["missed_other"] += e - s
@@ -115,6 +117,8 @@ def measure(clips, margin_s: float = 0.2) -> dict:
     out["top_gap_share"] = round(sum(s["top_gaps"] for s in pool) / gaps, 3) if gaps else None
     frames = sum(s["visible"] + s["missed_other"] for s in pool)
     out["top_frame_share"] = round(sum(s.get("top_frames", 0) for s in pool) / max(frames, 1), 4)
+    top_s = [g for s in pool for g in s.get("top_gap_s", [])]
+    out["top_gap_s"] = round(float(np.median(top_s)), 2) if top_s else None
     return out
 
 
