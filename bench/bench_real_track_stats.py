@@ -73,12 +73,10 @@ def real_padel(root: Path, fps: float = 25.0):
 REAL_VIEW = {"tennis": "tennis_broadcast", "padel": "padel_broadcast"}
 
 
-def simulated(sport: str, n: int, seed: int, degrade: dict | None, camera: str | None = None):
-    """``n`` simulated rallies as ``measure`` takes them: degraded by ``degrade`` (None: the clean track)."""
+def simulated(clips, seed: int, degrade: dict | None):
+    """``clips`` (:class:`SimClip`) as ``measure`` takes them: degraded by ``degrade`` (None: the clean track)."""
     from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.simulate import simulate_clips
 
-    clips = simulate_clips(sport, n, seed, ROOT / "runs" / "events_cache", progress=False, camera=camera)
     tracks = degrade_all(clips, seed, DegradeConfig.from_dict(degrade)) if degrade else [c.ball for c in clips]
     return [(t, c.events, c.fps, c.width, c.height) for t, c in zip(tracks, clips)]
 
@@ -125,19 +123,24 @@ def main(argv=None) -> int:
         base = experiment_degrade(sport)
         from training.events.simulate import simulate_clips
 
-        sims = simulate_clips(sport, args.sims, args.seed, ROOT / "runs" / "events_cache", progress=False)
+        cache = ROOT / "runs" / "events_cache"
+        sims = simulate_clips(sport, args.sims, args.seed, cache, progress=False)
         # the training camera's own share of frames above the picture; the crop makes up only the rest
-        clean = measure(simulated(sport, args.sims, args.seed, None))
-        view = measure(simulated(sport, args.sims, args.seed, None, camera=REAL_VIEW[sport]))
+        clean = measure(simulated(sims, args.seed, None))
         crop = top_crop_for([c.ball for c in sims], max(0.0, real["top_frame_share"] - clean["top_frame_share"]))
         fitted = degrade_from(real, base, top_crop=crop)
-        shipped = measure(simulated(sport, args.sims, args.seed, base))
-        refit = measure(simulated(sport, args.sims, args.seed, fitted))
+        shipped = measure(simulated(sims, args.seed, base))
+        refit = measure(simulated(sims, args.seed, fitted))
+        view = None
+        if REAL_VIEW[sport] != DEFAULT_CAMERA[sport]:
+            view = measure(simulated(simulate_clips(sport, args.sims, args.seed, cache, progress=False,
+                                                    camera=REAL_VIEW[sport]), args.seed, None))
         print(f"\n## {sport}: {real['clips']} real clips, {args.sims} simulated rallies per setting\n")
         print(cols)
         print("|---|---|---|---|---|---|---|---|")
         print(row("real", real))
-        print(row(f"simulated, clean, the real material's view ({REAL_VIEW[sport]})", view))
+        if view is not None:
+            print(row(f"simulated, clean, the real material's view ({REAL_VIEW[sport]})", view))
         print(row(f"simulated, clean, the training camera ({DEFAULT_CAMERA[sport]})", clean))
         print(row("simulated, the shipped tagger's degradation", shipped))
         print(row("simulated, fitted to the real tracks", refit))

@@ -117,7 +117,7 @@ def measure(clips, margin_s: float = 0.2) -> dict:
     out["top_gap_share"] = round(sum(s["top_gaps"] for s in pool) / gaps, 3) if gaps else None
     frames = sum(s["visible"] + s["missed_other"] for s in pool)
     out["top_frame_share"] = round(sum(s.get("top_frames", 0) for s in pool) / max(frames, 1), 4)
-    top_s = [g for s in pool for g in s.get("top_gap_s", [])]
+    top_s = [g for s in pool for g in s["top_gap_s"]]
     out["top_gap_s"] = round(float(np.median(top_s)), 2) if top_s else None
     return out
 
