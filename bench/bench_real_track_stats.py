@@ -94,7 +94,7 @@ def row(name: str, s: dict) -> str:
         d = s[c]
         return f"{d['hidden']:.2f} / {d['gap_s'][1]:.2f} ({d['gap_s'][0]:.2f}–{d['gap_s'][3]:.2f})" if d["gap_s"] else "–"
 
-    return (f"| {name} | {cls('player_near')} | {cls('player_far')} | {cls('ground')} | "
+    return (f"| {name} | {cls('player_near')} | {cls('player_far')} | {cls('serve_far')} | {cls('ground')} | "
             f"{s['other_runs_per_s']:.2f} / {s['other_runs_s'][1] if s['other_runs_s'] else float('nan'):.2f} | "
             f"{s['other_miss_share']:.2f} | {s['jitter_px']} | {s['top_gap_share']} / {s['top_frame_share']} / {s['top_gap_s']} |")
 
@@ -116,8 +116,9 @@ def main(argv=None) -> int:
         print(f"bench_real_track_stats: no real material at {root} (set RALLY3D_REAL): skipped")
         return 0
     t0 = time.process_time()
-    cols = ("| tracks | near hits: hidden / gap s median (25–90 %) | far hits | bounces | other misses per s / "
-            "median s | other-miss share | jitter px | gaps above the picture: share of gaps / of frames / median s |")
+    cols = ("| tracks | near hits: hidden / gap s median (25–90 %) | far hits (not serves) | far serves | bounces | "
+            "other misses per s / median s | other-miss share | jitter px | gaps above the picture: share of gaps / "
+            "of frames / median s |")
     for sport, read in (("tennis", real_tennis), ("padel", real_padel)):
         real = measure(read(root))
         base = experiment_degrade(sport)
@@ -137,7 +138,7 @@ def main(argv=None) -> int:
                                                     camera=REAL_VIEW[sport]), args.seed, None))
         print(f"\n## {sport}: {real['clips']} real clips, {args.sims} simulated rallies per setting\n")
         print(cols)
-        print("|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|")
         print(row("real", real))
         if view is not None:
             print(row(f"simulated, clean, the real material's view ({REAL_VIEW[sport]})", view))

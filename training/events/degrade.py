@@ -14,7 +14,8 @@ smoother then drops isolated outliers and smooths each piece. :func:`degrade` ap
    ``occlude_s`` seconds (the body; the hit at a random place inside the gap), ``player_far`` hits with
    ``p_occlude_far`` for ``occlude_far_s`` (default half as long), and every other event (bounce, wall, net) with ``p_gap_event`` for
    ``event_gap_s`` — on real tracks the tracker and the smoother's change-point cuts lose the ball at
-   most direction changes, so the ball is missing around most events;
+   most direction changes, so the ball is missing around most events; the far player's serve with
+   ``p_serve_gap_far`` in a longer gap that lies mostly before the contact (the toss lost against the crowd);
 3. random runs of misses of ``miss_run_s`` seconds until ``miss_frac`` of the visible frames are missed
    by them (on top of the occlusions);
 4. wrong positions on ``outlier_frac`` of the remaining detections, in runs of ``outlier_run`` frames,
@@ -22,8 +23,9 @@ smoother then drops isolated outliers and smooths each piece. :func:`degrade` ap
    position for the whole run) or lagging (the position of 2–6 frames earlier, pushed off);
 5. the pipeline's smoother (:func:`inference.detection.smooth.smooth_track`) with probability ``p_smooth``.
 
-A clip is left as annotated with probability ``p_clean`` (keeps the clean-input accuracy). Lengths are in
-seconds so the model is the same at 25–60 fps.
+A clip is left as annotated with probability ``p_clean`` (keeps the clean-input accuracy), or degraded by
+``alternative`` (another tracker's look) with probability ``p_alternative``. Lengths are in seconds so the
+model is the same at 25–60 fps.
 
 Example:
     >>> cfg = DegradeConfig()
@@ -77,6 +79,12 @@ class DegradeConfig:
         occlude_far_s: [min, max] length (s) of the gap around a far hit (None: half of ``occlude_s``); a
             real broadcast tracker loses the far player's hits for longer than the near one's
             (``training.events.real_stats``).
+        p_serve_gap_far: probability that the far player's serve (the hit at ``SimClip.rally[0]``) hides in a
+            gap of ``serve_gap_s`` seconds of which a share drawn in ``serve_before`` lies before the contact:
+            a broadcast tracker loses the far server's toss against the crowd (off by default).
+        alternative: another degradation (the same fields) that a clip gets instead with probability
+            ``p_alternative``: one model trained on two trackers' looks (e.g. a real broadcast tracker's and
+            the project's own detector's, ``conf/data/degrade/detector_measured.yaml``).
     """
 
     enabled: bool = True
@@ -101,17 +109,32 @@ class DegradeConfig:
     top_crop: float = 0.0
     miss_by_diameter: tuple = ()
     occlude_far_s: tuple | None = None
+    p_serve_gap_far: float = 0.0
+    serve_gap_s: tuple[float, float] = (0.2, 0.65)
+    serve_before: tuple[float, float] = (0.65, 0.95)
+    alternative: dict | None = None
+    p_alternative: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("p_clean", "p_occlude_near", "p_occlude_far", "p_gap_event", "miss_frac", "outlier_frac", "p_smooth",
-                     "far_miss", "far_y", "top_crop"):
+                     "far_miss", "far_y", "top_crop", "p_serve_gap_far", "p_alternative"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
                 raise ValueError(f"DegradeConfig.{name} must be a probability/fraction in [0, 1], got {v!r}")
         if self.miss_frac >= 0.95 or self.outlier_frac >= 0.95:
             raise ValueError("DegradeConfig.miss_frac and outlier_frac must be below 0.95 (nothing would be left)")
-        for name in ("occlude_s", "event_gap_s", "miss_run_s", "outlier_px", "jitter_px"):
+        for name in ("occlude_s", "event_gap_s", "miss_run_s", "outlier_px", "jitter_px", "serve_gap_s",
+                     "serve_before"):
             object.__setattr__(self, name, _pair(name, getattr(self, name)))
+        if self.serve_before[1] > 1.0:
+            raise ValueError(f"DegradeConfig.serve_before is a share of the gap in [0, 1], got {self.serve_before!r}")
+        if self.alternative is not None:  # validated now, so a bad nested key fails at start-up, not mid-epoch
+            alt = DegradeConfig.from_dict(self.alternative)
+            if alt.alternative is not None:
+                raise ValueError("DegradeConfig.alternative cannot have an alternative of its own")
+            object.__setattr__(self, "alternative", alt)
+        elif self.p_alternative > 0:
+            raise ValueError("DegradeConfig.p_alternative > 0 needs an alternative setting")
         if self.occlude_far_s is not None:
             object.__setattr__(self, "occlude_far_s", _pair("occlude_far_s", self.occlude_far_s))
         run = _pair("outlier_run", self.outlier_run, lo=1)
@@ -131,7 +154,15 @@ class DegradeConfig:
         if d is not None and not isinstance(d, cls):
             # "measured": the figures a measured setting was derived from (bench_track_stats.py)
             d = {k: v for k, v in dict(d).items() if k != "measured"}
+            if d.get("alternative") is not None and not isinstance(d["alternative"], cls):
+                d["alternative"] = dict(d["alternative"])  # an OmegaConf node → a plain mapping
         return config_from_dict(cls, d, "data.degrade")
+
+    def pick(self, rng: np.random.Generator) -> DegradeConfig:
+        """The setting one clip gets: :attr:`alternative` with probability :attr:`p_alternative`, else this."""
+        if self.alternative is not None and self.p_alternative > 0 and rng.random() < self.p_alternative:
+            return self.alternative
+        return self
 
 
 def config_from_dict(cls, d, key: str):
@@ -174,7 +205,14 @@ def occlusion_mask(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig) -
     mask = np.zeros(n, bool)
     far = (cfg.occlude_far_s, 1.0) if cfg.occlude_far_s is not None else (cfg.occlude_s, 0.5)
     hits = {"player_near": (cfg.p_occlude_near, cfg.occlude_s, 1.0), "player_far": (cfg.p_occlude_far, *far)}
+    serve = sim.rally[0] if sim.rally is not None else None
     for f, label in zip(sim.events.frame, sim.events.event):
+        if cfg.p_serve_gap_far > 0 and str(label) == "player_far" and serve is not None and int(f) == int(serve):
+            if rng.random() < cfg.p_serve_gap_far:  # the far serve: its toss lost against the crowd
+                length = _frames(rng.uniform(*cfg.serve_gap_s), sim.fps)
+                start = int(f) - int(round(rng.uniform(*cfg.serve_before) * length))
+                mask[max(start, 0):max(start + length, 0)] = True
+            continue
         p, span, scale = hits.get(str(label), (cfg.p_gap_event, cfg.event_gap_s, 1.0))
         if p <= 0 or rng.random() >= p:
             continue
@@ -275,6 +313,7 @@ def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = Degrade
     n = sim.n_frames
     ball = every_frame(track if track is not None else sim.ball, n)
     none = np.zeros(n, bool)
+    cfg = cfg.pick(rng) if cfg.enabled else cfg
     if not cfg.enabled or rng.random() < cfg.p_clean:
         return Degraded(ball, none, none.copy(), none.copy(), False)
     size = np.array([sim.width, sim.height], float)

@@ -7,7 +7,11 @@ Per event class: the share of events whose frame (±1) has no ball (*hidden*), t
 the share of the visible frames they take; the jitter (robust σ of each point's distance from a quadratic
 through its neighbours, px) and whether positions are whole pixels; the share of gaps the ball leaves and
 re-enters through the top of the picture (lobs). Only the labelled stretch counts (from the first to the
-last event, ±``margin_s``): the server's bounces before the serve are not labelled.
+last event, ±``margin_s``): the server's bounces before the serve are not labelled. A clip's first event,
+when it is the far player's hit, is a far serve and counts apart (``serve_far``): a real broadcast tracker
+loses the far server's toss against the crowd, so the far serve hides in a long gap that lies mostly
+before the contact (RG2025: 77 % of the far serves, median 0.5 s, 81 % of it before the hit); the near
+server's toss stays in view (its serve counts with the near hits).
 
 Example:
     >>> stats = measure([(track, events, fps, width, height), ...])
@@ -19,7 +23,7 @@ import numpy as np
 
 from inference.clipio import BallTrack, HitEvents
 
-CLASSES = ("player_near", "player_far", "ground")
+CLASSES = ("player_near", "player_far", "ground", "serve_far")
 QUANTILES = (0.25, 0.5, 0.75, 0.9)
 
 
@@ -59,12 +63,16 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     b = min(n, int(events.frame[-1] + margin_s * fps) + 1)
     near_event = np.zeros(n, bool)
     runs = [(s + a, e + a) for s, e in _runs(~seen[a:b])]
-    for f, c in zip(events.frame.tolist(), events.event.tolist()):
+    for k, (f, c) in enumerate(zip(events.frame.tolist(), events.event.tolist())):
+        if k == 0 and c == "player_far":
+            c = "serve_far"  # the clip's first event, the far player's hit: a far serve
         if c not in CLASSES:
             continue
         hidden = not seen[max(0, f - 1):f + 2].any()
         out["hidden"][c].append(hidden)
-        for s, e in runs:
+        # a serve's gap is taken whole: its toss lies before the labelled stretch (a clip's first gap, which
+        # may be the clip's unseen start, is not a gap the tracker made)
+        for s, e in (runs if c != "serve_far" else [r for r in _runs(~seen) if r[0] > 0]):
             if s - 1 <= f <= e:
                 out["gap_s"][c].append((e - s) / fps)
                 out["where"][c].append((f - s + 0.5) / max(e - s, 1))
@@ -102,7 +110,8 @@ def measure(clips, margin_s: float = 0.2) -> dict:
         where = np.array([w for s in pool for w in s["where"][c]])
         out[c] = {"events": len(hidden), "hidden": round(float(np.mean(hidden)), 3) if hidden else None,
                   "gap_s": [round(float(q), 3) for q in np.quantile(gaps, QUANTILES)] if len(gaps) else None,
-                  "where": round(float(np.median(where)), 2) if len(where) else None}
+                  "where": round(float(np.median(where)), 2) if len(where) else None,
+                  "where_iqr": [round(float(q), 2) for q in np.quantile(where, (0.25, 0.75))] if len(where) else None}
     runs = np.array([r for s in pool for r in s["other_runs_s"]])
     seconds = sum(s["seconds"] for s in pool)
     visible = sum(s["visible"] for s in pool)
@@ -145,6 +154,13 @@ def degrade_from(stats: dict, base: dict | None = None, top_crop: float | None =
             out[p_key] = prob(d["hidden"]) if d["gap_s"] else 0.0
             if d["gap_s"]:
                 out[s_key] = span(d["gap_s"], cap=1.0)
+    serve = stats.get("serve_far") or {}
+    if serve.get("events"):  # the far serve: its toss lost against the crowd
+        out["p_serve_gap_far"] = prob(serve["hidden"]) if serve["gap_s"] else 0.0
+        if serve["gap_s"]:
+            out["serve_gap_s"] = span(serve["gap_s"], cap=1.5)
+            lo, hi = (float(np.clip(q, 0.0, 1.0)) for q in serve["where_iqr"])
+            out["serve_before"] = [round(lo, 2), round(max(hi, lo), 2)]
     if stats["other_runs_s"]:
         out.update(miss_frac=prob(stats["other_miss_share"]), miss_run_s=span(stats["other_runs_s"]))
     if top_crop is not None:
