@@ -102,13 +102,15 @@ def tennis_points(real: Path, table: Table, args) -> dict:
     if args.limit:
         points = points[:args.limit]
     torch.set_num_threads(1)
-    weights = choose_weights(None, "tennis", None)  # as `rally3d events` on a clip without players.csv
+    # as `rally3d events` on a clip without players.csv, or a candidate's file (--tennis-weights)
+    weights = Path(args.tennis_weights) if args.tennis_weights else choose_weights(None, "tennis", None)
     det = EventDetector.from_checkpoint(weights, sport="tennis")
     cs = det.class_set
     held = {p.name for p in points[-HELD_OUT:]}
     keys = ("all", "held_out", "rally_only", "labelled_span")
     counts = {k: EventCounts(cs.classes) for k in keys}
     per_point_fp_before = 0
+    serves = {"player_near": [0, 0], "player_far": [0, 0]}  # found, labelled: the point's first event, a hit
     for i, d in enumerate(points):
         clip = Clip(d)
         info = clip.info
@@ -129,6 +131,10 @@ def tennis_points(real: Path, table: Table, args) -> dict:
         span = pm & (pf >= gf.min() - TOL) & (pf <= gf.max() + TOL) if len(gf) else np.zeros(len(pf), bool)
         counts["labelled_span"].add(gf, gc, pf[span], pc[span], TOL)
         per_point_fp_before += int(np.sum(pm & (pf < (gf.min() - TOL if len(gf) else b + 1))))
+        if len(gf) and cs.classes[gc[0]] in serves:
+            hit = serves[cs.classes[gc[0]]]
+            hit[1] += 1
+            hit[0] += int(np.any((np.abs(pf - gf[0]) <= TOL) & (pc == gc[0])))
         if (i + 1) % 50 == 0 or i + 1 == len(points):
             log(f"[tennis_points] {i + 1}/{len(points)} points")
     part = "tennis points (RG2025, real tracker)"
@@ -145,6 +151,10 @@ def tennis_points(real: Path, table: Table, args) -> dict:
         s, far = counts[key].scores(), counts[key].scores(cs.index("player_far"))
         table.add(part, what, s["prec"], s["recall"], s["f1"], f"far hits F1 {far['f1']:.3f}")
         out[key] = {"all": s, "far": far}
+    for side, (found, n) in serves.items():
+        table.add(part, f"serves, {side.split('_')[1]} server", r=found / n if n else float("nan"),
+                  more=f"{found} of {n} found (recall; the point's first label)")
+        out[f"serves_{side.split('_')[1]}"] = {"found": found, "labelled": n}
     table.add(part, "model / tolerance", more=f"{weights.name}, ball only (no players, no camera), "
               f"every event kept; ±{TOL} frames at 50 fps; {len(points)} points; {per_point_fp_before} "
               "events found before the first label (pre-serve bounces: unlabelled)")
@@ -625,6 +635,8 @@ def main(argv=None) -> int:
     ap.add_argument("--reuse", action="store_true", help="tennis clips: keep runs/bench_real/tennis/* and "
                     "let the pipeline reuse its cached stages (default: a fresh run)")
     ap.add_argument("--device", default="cpu", help="tennis clips: detector device")
+    ap.add_argument("--tennis-weights", default=None,
+                    help="tennis points: score this event model file instead of the shipped one `rally3d events` picks")
     ap.add_argument("--padel-fps", type=float, default=25.0,
                     help="frame rate of the WPT rows (default 25: measured from the ball's fall, see docs)")
     ap.add_argument("--padel-lead", type=float, default=0.4, help="seconds of track before a serve window")

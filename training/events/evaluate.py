@@ -84,19 +84,27 @@ def tune_decoder(probs: Sequence[np.ndarray], clips: Sequence[SimClip], class_se
 
 
 def fit_temperature(logits: torch.Tensor, labels: torch.Tensor, iters: int = 200) -> float:
-    """Temperature T minimising the NLL of ``softmax(logits / T)`` on validation windows."""
+    """Temperature T in [0.05, 20] minimising the NLL of ``softmax(logits / T)`` on validation windows; 1.0
+    (with a warning) when the fit does not converge to a finite value (e.g. a few windows of one class)."""
+    import warnings
+
+    lo, hi = float(np.log(0.05)), float(np.log(20.0))
     log_t = torch.zeros(1, requires_grad=True)
     opt = torch.optim.LBFGS([log_t], lr=0.1, max_iter=iters)
     loss_fn = torch.nn.CrossEntropyLoss()
 
     def closure():
         opt.zero_grad()
-        loss = loss_fn(logits / log_t.exp(), labels)
+        loss = loss_fn(logits / log_t.clamp(lo, hi).exp(), labels)
         loss.backward()
         return loss
 
     opt.step(closure)
-    return float(log_t.detach().exp().clamp(0.05, 20.0))
+    t = float(np.clip(np.exp(float(log_t.detach())), 0.05, 20.0))  # in float64: the bounds hold exactly
+    if not np.isfinite(t):
+        warnings.warn("the temperature fit did not converge on the validation windows: temperature 1.0", stacklevel=2)
+        return 1.0
+    return t
 
 
 def detector_scorer(det: EventDetector) -> Scorer:

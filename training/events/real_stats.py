@@ -6,7 +6,8 @@ Per event class: the share of events whose frame (±1) has no ball (*hidden*), t
 (seconds) and where the event lies in them; elsewhere: the runs of misses (count per second, lengths) and
 the share of the visible frames they take; the jitter (robust σ of each point's distance from a quadratic
 through its neighbours, px) and whether positions are whole pixels; the share of gaps the ball leaves and
-re-enters through the top of the picture (lobs). Only the labelled stretch counts (from the first to the
+re-enters through the top of the picture (lobs); the serve's flight (serve → its bounce, s: the serve's speed,
+which the simulator's tennis serves were fitted to). Only the labelled stretch counts (from the first to the
 last event, ±``margin_s``): the server's bounces before the serve are not labelled. A clip's first event,
 when it is the far player's hit, is a far serve and counts apart (``serve_far``): a real broadcast tracker
 loses the far server's toss against the crowd, so the far serve hides in a long gap that lies mostly
@@ -53,7 +54,7 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     n = int(max(track.frame.max() + 1 if len(track) else 0, events.frame.max() + 1 if len(events) else 0))
     out = {"hidden": {c: [] for c in CLASSES}, "gap_s": {c: [] for c in CLASSES}, "where": {c: [] for c in CLASSES},
            "other_runs_s": [], "seconds": 0.0, "visible": 0, "missed_other": 0, "jitter": [], "integer": [],
-           "gaps": 0, "top_gaps": 0, "top_gap_s": []}
+           "gaps": 0, "top_gaps": 0, "top_gap_s": [], "serve_flight_s": []}
     if not len(events) or not n:
         return out
     dense = track.dense(n)
@@ -62,6 +63,9 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     a = max(0, int(events.frame[0] - margin_s * fps))
     b = min(n, int(events.frame[-1] + margin_s * fps) + 1)
     near_event = np.zeros(n, bool)
+    ev = [str(c) for c in events.event]
+    if len(ev) > 1 and ev[0] in ("player_near", "player_far") and ev[1] == "ground":  # the serve's own flight
+        out["serve_flight_s"].append(float(events.frame[1] - events.frame[0]) / fps)
     runs = [(s + a, e + a) for s, e in _runs(~seen[a:b])]
     for k, (f, c) in enumerate(zip(events.frame.tolist(), events.event.tolist())):
         if k == 0 and c == "player_far":
@@ -126,6 +130,8 @@ def measure(clips, margin_s: float = 0.2) -> dict:
     out["top_gap_share"] = round(sum(s["top_gaps"] for s in pool) / gaps, 3) if gaps else None
     frames = sum(s["visible"] + s["missed_other"] for s in pool)
     out["top_frame_share"] = round(sum(s.get("top_frames", 0) for s in pool) / max(frames, 1), 4)
+    flights = [g for s in pool for g in s.get("serve_flight_s", [])]
+    out["serve_flight_s"] = [round(float(q), 3) for q in np.quantile(flights, (0.1, 0.5, 0.9))] if flights else None
     top_s = [g for s in pool for g in s["top_gap_s"]]
     out["top_gap_s"] = round(float(np.median(top_s)), 2) if top_s else None
     return out

@@ -25,7 +25,7 @@ class SampleClip:
 SAMPLE_CLIPS = (
     SampleClip("padel_sample", 7, SynthConfig(sport="padel", randomise_camera=False, width=1280, height=720,
                                              fps=30.0, codec="h264", crf=26, max_frames=240)),
-    SampleClip("tennis_sample", 3, SynthConfig(sport="tennis", randomise_camera=False, width=1280, height=720,
+    SampleClip("tennis_sample", 27, SynthConfig(sport="tennis", randomise_camera=False, width=1280, height=720,
                                               fps=30.0, codec="h264", crf=26, max_frames=180)),
 )
 

@@ -114,9 +114,24 @@ def test_real_stats_measure_the_whole_serve_gap_and_fit_it():
     assert far["gap_s"][1] == pytest.approx(25 / 50, abs=0.03)  # 0.5 s, not the 0.2 s inside the margin
     assert far["where"] == pytest.approx(20.5 / 25, abs=0.05)
     assert s["player_far"]["events"] == 0  # the serve counts apart from the far player's other hits
+    assert s["serve_flight_s"][1] == pytest.approx(30 / 50)  # serve → its bounce
     fit = degrade_from(s, {"p_clean": 0.5})
     assert fit["p_serve_gap_far"] == 1.0
     assert fit["serve_gap_s"][0] <= 0.5 <= fit["serve_gap_s"][1] + 1e-9
     lo, hi = fit["serve_before"]
     assert 0.7 <= lo <= hi <= 0.9
     DegradeConfig.from_dict(fit)  # a valid setting
+
+
+def test_simulated_tennis_serves_fly_at_broadcast_speed():
+    """Serve → its bounce as in a real men's final (10 / 50 / 90 %: 0.36 / 0.41 / 0.50 s at 50 fps); the
+    simulator's earlier 35–55 m/s serves took 0.40 / 0.48 / 0.58 s."""
+    flights = []
+    for seed in range(60):
+        c = simulate_clip("tennis", 7000 + seed, fps=50)
+        e = [str(x) for x in c.events.event]
+        if len(e) > 1 and e[0].startswith("player") and e[1] == "ground":
+            flights.append((c.events.frame[1] - c.events.frame[0]) / c.fps)
+    assert len(flights) >= 30
+    assert 0.37 <= float(np.median(flights)) <= 0.45
+    assert float(np.quantile(flights, 0.9)) <= 0.53

@@ -38,8 +38,12 @@ def test_many_seeds_simulate(sport_rallies):
     court, cfg, rallies = sport_rallies
     assert len(rallies) == len(SEEDS)
     n_hits = [len(hits(r)) for r in rallies]
-    assert min(n_hits) >= 2 and max(n_hits) <= cfg.n_hits[1]
+    assert min(n_hits) >= 1 and max(n_hits) <= cfg.n_hits[1]
     assert np.mean(n_hits) > 4
+    # a rally of one hit is an ace (tennis serves at broadcast speed): a winner, the serve bounced in
+    aces = [r for r in rallies if len(hits(r)) == 1]
+    assert all(r.outcome == "winner" and any(c.event == "ground" for c in r.contacts) for r in aces)
+    assert len(aces) <= 0.2 * len(rallies)  # real men's final: 5 % aces, 16 % unreturned serves
     outcomes = {r.outcome for r in rallies}
     assert "winner" in outcomes and outcomes & set(cfg.errors)
     assert all(r.sport == court.sport for r in rallies)
@@ -92,13 +96,14 @@ def test_serve_is_from_behind_the_line_and_bounces_in_the_diagonal_box(sport_ral
     court, _, rallies = sport_rallies
     z = Zones.of(court, 0.0)
     for rally in rallies:
-        serve, ret = hits(rally)[:2]
+        serve, ret = (hits(rally) + [None])[:2]  # no return: an ace
         server = rally.players[serve.player]
         root = root_at(server, serve.t)
         line = z.service_depth if court.sport == "padel" else z.half
         assert z.depth(server.team, root[1]) > line
-        bounces = [c for c in rally.contacts if serve.t < c.t < ret.t and c.event == "ground"]
-        assert len(bounces) == 1
+        until = ret.t if ret is not None else np.inf
+        bounces = [c for c in rally.contacts if serve.t < c.t < until and c.event == "ground"]
+        assert len(bounces) == 1 if ret is not None else len(bounces) >= 1
         box = "left" if root[0] > z.centre_x else "right"
         receiver_team = "far" if server.team == "near" else "near"
         assert z.in_box(receiver_team, box, bounces[0].position[:2])
