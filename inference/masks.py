@@ -174,7 +174,7 @@ def auto_clip_mask(clip: Clip, samples: int = AUTO_SAMPLES) -> AutoMask:
     court_px = None
     if clip.camera_path.is_file():
         from inference.court import load_court
-        from inference.courtfit.drift import court_line_samples
+        from inference.courtfit.model import court_line_samples
 
         court_px = court_line_samples(clip.read_camera(), load_court(clip.court_path()))
     found = find_static_overlays(frames, court_px)

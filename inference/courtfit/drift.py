@@ -20,7 +20,7 @@ from inference.camera import Camera
 from inference.court import Court
 
 from .lines import LineEvidence, line_channel, line_mask, working_scale
-from .model import court_lines
+from .model import court_line_samples
 
 #: drift below this (px) is never reported, whatever the calibration's RMS
 MIN_DRIFT_PX = 3.0
@@ -77,15 +77,6 @@ class DriftReport:
         for f, (dx, dy), s in zip(self.frames, self.shifts, self.support):
             lines.append(f"{f:5d}  {f / self.fps:7.2f}  {dx:7.2f}  {dy:7.2f}  {s:7.2f}")
         return "\n".join(lines + [self.summary()])
-
-
-def court_line_samples(cam: Camera, court: Court, step_m: float = 0.1) -> np.ndarray:
-    """(P, 2) full-resolution pixels of the court's floor lines inside the image."""
-    model = court_lines(court)
-    pts, _ = model.samples(step_m)
-    px = cam.project(np.concatenate([pts, np.zeros((len(pts), 1))], axis=1))
-    w, h = cam.image_size
-    return px[np.isfinite(px).all(1) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)]
 
 
 def _ridge_map(L: np.ndarray) -> np.ndarray:

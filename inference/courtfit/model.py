@@ -102,3 +102,13 @@ def court_lines(court: Court) -> CourtLines:
     return CourtLines(np.array(segs, dtype=float).reshape(-1, 2, 2),
                       tuple(ModelLine("transverse", y) for y in sorted(trans, reverse=True)),
                       tuple(ModelLine("longitudinal", x) for x in sorted(longi)), raised, structure)
+
+
+def court_line_samples(cam, court: Court, step_m: float = 0.1) -> np.ndarray:
+    """(P, 2) full-resolution pixels of the court's floor lines inside the image of ``cam``
+    (:class:`~inference.camera.Camera`), one every ``step_m`` metres of line."""
+    model = court_lines(court)
+    pts, _ = model.samples(step_m)
+    px = cam.project(np.concatenate([pts, np.zeros((len(pts), 1))], axis=1))
+    w, h = cam.image_size
+    return px[np.isfinite(px).all(1) & (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)]

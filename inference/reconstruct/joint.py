@@ -19,7 +19,7 @@ along-ray model error growing with the time from the nearest contact; :class:`.s
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -27,6 +27,7 @@ from threadpoolctl import threadpool_limits
 from inference.physics import FlightModel
 
 from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, contact_priors, nearest_observed
+from .plan import Plan, PlanContact
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
 from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain,
@@ -54,27 +55,6 @@ class JointConfig(ShootingConfig):
     uncertainty: Uncertainty | None = None  # covariance calibration (None: the court YAML's `uncertainty`)
     max_sigma_m: float = 3.0          # a flight whose median σ exceeds this is reported failed
     max_speed_ms: float = 75.0        # a flight launched faster (270 km/h; records are ~263) is implausible
-
-
-# ---------------------------------------------------------------------------------------------------
-# The plan: which contacts are fitted
-# ---------------------------------------------------------------------------------------------------
-@dataclass
-class PlanContact:
-    """A contact to fit: an event (``event`` = its index in the clip's events) or an inserted one."""
-
-    prior: ContactPrior
-    event: int | None
-    note: str = ""
-
-
-@dataclass
-class Plan:
-    contacts: list[PlanContact]
-    notes: list[str] = field(default_factory=list)
-
-    def key(self) -> tuple:
-        return tuple((c.prior.frame, c.prior.label) for c in self.contacts)
 
 
 @dataclass

@@ -22,9 +22,10 @@ import numpy as np
 from inference.court import Court
 
 from .observations import PLAYER_EVENTS, Observations, contact_prior
+from .plan import Plan, PlanContact
 
 if TYPE_CHECKING:
-    from .joint import ChainFit, JointConfig, Plan
+    from .joint import ChainFit, JointConfig
     from .results import RallyFit
     from .shooting import Problem, Solution
 
@@ -322,8 +323,6 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
     first): a missed bounce inside it (at the track's sharpest turn, then in its gaps: a bounce the tracker
     lost or one outside the picture), a missed racket hit (a volley, a hit hidden by the player), another
     surface or event class at its contacts, no contact at all."""
-    from .joint import Plan, PlanContact
-
     pb = fit.problem
     ch = pb.chain
     f = ch.flights[k]

@@ -24,7 +24,7 @@ from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector, load_model_file
 from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
-from training.run import resume_path, write_eval_results
+from training.common import resume_path, write_eval_results
 
 from .crop_data import CropEventDataModule
 from .run import table_rows, test_and_export
@@ -85,7 +85,7 @@ def tune_crop(det: EventDetector, dm: CropEventDataModule, passes: int = 2) -> f
 
 
 def train_crop_events(cfg: DictConfig) -> dict[str, float]:
-    from training.run import build
+    from training.common import build
 
     log.info("config:\n%s", OmegaConf.to_yaml(cfg, resolve=False))
     if cfg.get("threads"):

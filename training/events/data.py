@@ -341,7 +341,7 @@ class EventDataModule(L.LightningDataModule):
             the players as a pose backend gives them (misses, jitter, swaps; a new draw each epoch for
             training, a fixed one for val and test); None or ``enabled: false`` keeps them exact.
         sequence: 0 (HitNet's windows) or the crop length in reference frames of the event tagger's
-            examples (:class:`~training.events.tagger.SequenceSet`: ``sequence_repeats`` random crops per
+            examples (:class:`~training.events.sequences.SequenceSet`: ``sequence_repeats`` random crops per
             training clip and epoch, events spread over ± ``sequence_radius`` frames); ``batch_size`` then
             counts crops.
         prep_workers: forked processes for the per-clip data work (simulation, labelling, each epoch's new
@@ -494,7 +494,7 @@ class EventDataModule(L.LightningDataModule):
         """HitNet's windows, or the tagger's crops (:attr:`sequence`) of these clips."""
         if not self.sequence:
             return WindowSet(clips, self.window, self.last_k, self.lookahead)
-        from .tagger import SequenceSet
+        from .sequences import SequenceSet
 
         return SequenceSet(clips, self.sequence, self.sequence_radius, random=split == "train",
                            repeats=self.sequence_repeats)

@@ -25,7 +25,7 @@ from inference.events.features import FeatureConfig
 from inference.events.network import EventTagger
 from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
-from training.run import guarded_table, resume_path, save_manifests, write_eval_results
+from training.common import guarded_table, resume_path, save_manifests, write_eval_results
 
 from .data import EventDataModule
 from .degrade import DegradeConfig, degrade_all
@@ -154,7 +154,7 @@ def table_rows(counts, **common) -> list[dict]:
 
 
 def train_events(cfg: DictConfig) -> dict[str, float]:
-    from training.run import build
+    from training.common import build
 
     log.info("config:\n%s", OmegaConf.to_yaml(cfg, resolve=False))
     if cfg.get("threads"):

@@ -25,7 +25,7 @@ from inference.clipio.frames import write_frames_folder
 from inference.court import Court, load_court
 from inference.skeleton import COCO17
 
-from training.preflight import PARTIAL, read_marker
+from .partial import PARTIAL, read_marker
 
 from .bodies import PlayerPose, articulate
 from .cameras import CameraSpec
