@@ -32,7 +32,9 @@ def arg_parser() -> argparse.ArgumentParser:
     ap.add_argument("--sport", default="tennis")
     ap.add_argument("--clips", type=int, default=60)
     ap.add_argument("--fps", type=float, default=50.0)
-    ap.add_argument("--weights", nargs="+", default=["shipped"])
+    ap.add_argument("--weights", nargs="+", default=["shipped"],
+                    help="model files; `shipped`: the sport's default, the file `rally3d events` uses (the event tagger "
+                         "since 2026-11-29; earlier tables in docs/events.md name the ball-only HitNet `shipped`)")
     ap.add_argument("--cache", default="runs/events_cache")
     ap.add_argument("--degrade", default=None, help="a measured data.degrade YAML: one more condition")
     ap.add_argument("--bridge-too", action="store_true", help="each model also with gap bridging (off by default)")

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet, PhysicsParams
-from inference.events.detector import PLAYER_WEIGHTS, WEIGHTS_DIR, default_weights
+from inference.events.detector import PLAYER_WEIGHTS, WEIGHTS_DIR, ball_only_weights
 
 
 def timed(fn, clips) -> float:
@@ -39,7 +39,7 @@ def main() -> None:
     cs, fc = ClassSet.load("padel6"), FeatureConfig()
     clips = simulate_clips("padel", args.clips, seed=99, progress=False)
     dets: list[tuple[str, EventDetector]] = []
-    for path in (default_weights("padel"), WEIGHTS_DIR / "hitnet_padel_players.pth.tar", WEIGHTS_DIR / PLAYER_WEIGHTS["padel"]):
+    for path in (ball_only_weights("padel"), WEIGHTS_DIR / "hitnet_padel_players.pth.tar", WEIGHTS_DIR / PLAYER_WEIGHTS["padel"]):
         if path.is_file():  # the player-aware ones run here without players (same cost)
             det = EventDetector.from_checkpoint(path)
             dets.append((f"{'tagger' if det.kind == 'tagger' else 'HitNet'} shipped ({path.name})", det))

@@ -116,7 +116,9 @@ class EventResult:
         return f"{len(low)} event{'s' if len(low) > 1 else ''} below {below:g} confidence: {items}{more}"
 
 
-def default_weights(sport: str) -> Path:
+def ball_only_weights(sport: str) -> Path:
+    """The shipped ball-only model (HitNet) of ``sport``: the baseline, and the default where no player-aware
+    model is shipped (:func:`choose_weights` answers which file is the default)."""
     if sport not in DEFAULT_WEIGHTS:
         raise KeyError(f"no shipped hit-event model for sport {sport!r}; known: {sorted(DEFAULT_WEIGHTS)}. "
                        "Pass a model file (train one with python train.py +experiment=hitnet_<sport>).")
@@ -137,7 +139,7 @@ def choose_weights(path: str | Path | None, sport: str, players: PlayerTracks | 
     wanted = has_players(players) or sport in PLAYERS_OPTIONAL
     if wanted and sport in PLAYER_WEIGHTS and (WEIGHTS_DIR / PLAYER_WEIGHTS[sport]).is_file():
         return WEIGHTS_DIR / PLAYER_WEIGHTS[sport]
-    return default_weights(sport)
+    return ball_only_weights(sport)
 
 
 def model_wants_players(path: str | Path) -> bool:
@@ -198,8 +200,9 @@ class EventDetector:
     # ------------------------------------------------------------------------------------ loading
     @classmethod
     def from_checkpoint(cls, path: str | Path | None, sport: str = "padel") -> EventDetector:
-        """Load a model file; ``None`` loads the shipped default of ``sport``."""
-        blob = load_model_file(default_weights(sport) if path is None else path)
+        """Load a model file; ``None`` loads the shipped default of ``sport``, the file ``rally3d events`` and
+        ``infer`` use (:func:`choose_weights`: the event tagger where one is shipped)."""
+        blob = load_model_file(choose_weights(path, sport))
         return cls.from_blob(blob)
 
     @classmethod

@@ -105,7 +105,7 @@ def test_proposed_events_match_the_annotated_rally(tmp_path):
 def test_no_event_model_gives_a_clear_message(tmp_path, monkeypatch):
     import inference.events.detector as det
 
-    monkeypatch.setattr(det, "default_weights", lambda sport: tmp_path / "missing.pth.tar")
+    monkeypatch.setattr(det, "choose_weights", lambda path, sport, players=None: tmp_path / "missing.pth.tar")
     s = LabelSession(copy_sample(tmp_path / "c"), autosave=False)
     with pytest.raises(RuntimeError, match="no hit-event model available"):
         propose_events(s)

@@ -126,10 +126,12 @@ def test_the_sides_player_nearest_the_ball_and_teams_from_court_positions():
 
 
 def test_shipped_ball_only_weights_still_load_and_run(tennis):
+    from inference.events import detector as mod
+
     for sport in ("padel", "tennis"):
-        det = EventDetector.from_checkpoint(None, sport=sport)
+        det = EventDetector.from_checkpoint(mod.ball_only_weights(sport))
         assert not det.wants_players and det.features.n_features == 5 and det.net.hparams["n_features"] == 5
-    det = EventDetector.from_checkpoint(None, sport="tennis")
+    det = EventDetector.from_checkpoint(mod.ball_only_weights("tennis"))
     c = tennis
     r1 = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames)
     r2 = det.predict(c.ball, c.fps, c.width, c.height, n_frames=c.n_frames, players=c.players)  # ignored
@@ -204,7 +206,7 @@ def test_the_shipped_player_model_beats_the_ball_only_one_without_players(sport)
     clips = simulate_clips(sport, 6, seed=6262, progress=False, fps=50.0)
     tracks = degrade_all(clips, 3, DegradeConfig(p_clean=0.0, integer_px=True, far_miss=0.3))
     f1 = {}
-    for name, path in (("players", mod.WEIGHTS_DIR / mod.PLAYER_WEIGHTS[sport]), ("ball", mod.default_weights(sport))):
+    for name, path in (("players", mod.WEIGHTS_DIR / mod.PLAYER_WEIGHTS[sport]), ("ball", mod.ball_only_weights(sport))):
         det = EventDetector.from_checkpoint(path)
         counts = EventCounts(det.class_set.classes)
         for c, tr in zip(clips, tracks):

@@ -419,4 +419,6 @@ def test_a_model_that_times_its_hits_keeps_the_chains_first_hit_over_a_later_tra
     assert (timed.start, timed.serve_source) == (108, "chain")
     assert not timed.inside[0] and timed.inside[1]  # a warm-up bounce 1.8 s before stays outside the point
     assert EventDetector.from_checkpoint("inference/weights/tagger_padel_players.pth.tar").rally_params().hits_timed
-    assert not EventDetector.from_checkpoint(None, sport="padel").rally_params().hits_timed
+    from inference.events.detector import ball_only_weights
+
+    assert not EventDetector.from_checkpoint(ball_only_weights("padel")).rally_params().hits_timed

@@ -11,7 +11,7 @@ import torch
 
 from inference.cli import main
 from inference.clipio import Clip
-from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet, default_weights
+from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet, ball_only_weights
 from inference.pipeline.stages import build_stages
 
 
@@ -73,7 +73,7 @@ def test_infer_feeds_players_to_a_player_aware_model(tennis_clip, player_model, 
     assert len(with_players) and len(without)
     assert main([*args, "--overwrite"]) == 0
     assert re.search(r"^events\s+done.*; player-aware, no players\)", capsys.readouterr().out, re.M)
-    assert main([*args, "--overwrite", "--events", str(default_weights("tennis"))]) == 0
+    assert main([*args, "--overwrite", "--events", str(ball_only_weights("tennis"))]) == 0
     assert re.search(r"^events\s+done.*; ball only\)", capsys.readouterr().out, re.M)
     # with players and no --events, tennis uses the shipped player-aware model
     shutil.copy(bare / "gt" / "players.csv", bare / "players.csv")
