@@ -18,6 +18,7 @@ along-ray model error growing with the time from the nearest contact; :class:`.s
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, replace
 
@@ -34,6 +35,8 @@ from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfi
                        FrameErrorModel, frame_error_model, net_height, solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -286,7 +289,10 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     try:
         sol = solve(problem, theta)
     except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): the plan fails
-        return f"the fit diverged ({e})"
+        # the library's words ("cannot convert float NaN to integer") go to the log, not to the user's reason
+        log.debug("the fit of frames %d–%d diverged: %s: %s", chain.first_frame, chain.last_frame, type(e).__name__, e)
+        return (f"the fit diverged between frames {chain.first_frame} and {chain.last_frame} (no consistent flight "
+                "through these contacts: check the 2D ball and the events there)")
     checks = check_flights(problem, sol, cfg)
     return ChainFit(plan, problem, sol, checks)
 

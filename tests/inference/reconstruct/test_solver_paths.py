@@ -146,3 +146,22 @@ def test_a_flight_sent_flying_by_a_wild_start_is_capped_and_the_covariance_holds
     assert np.median(across) > 0.003, np.median(across)      # m: 6.8 mm here; collapsed, 1 mm
     ok = [s for s in fit.segments if s.ok]
     assert len(ok) >= len(fit.segments) - 2
+
+
+def test_a_diverged_fit_gives_a_reason_in_words_not_the_librarys(sample_obs, monkeypatch):
+    """A solver step that turns a contact time into NaN fails the plan with a reason that names the frames and
+    what to check — never the exception text of the library underneath (issue 42)."""
+    import inference.reconstruct.joint as joint
+    from inference.reconstruct.joint import Plan, PlanContact, _fit_plan
+    from inference.reconstruct.observations import contact_priors
+    from inference.reconstruct.shooting import HitPrior
+
+    def wild(problem, theta):
+        raise ValueError("cannot convert float NaN to integer")
+
+    monkeypatch.setattr(joint, "solve", wild)
+    plan = Plan([PlanContact(p, i) for i, p in enumerate(contact_priors(sample_obs))])
+    why = _fit_plan(sample_obs, plan, JointConfig(), FlightModel.from_ball(sample_obs.court.ball),
+                    HitPrior.from_court(sample_obs.court))
+    assert isinstance(why, str) and why.startswith("the fit diverged between frames")
+    assert "NaN" not in why and "convert" not in why and "check the 2D ball" in why
