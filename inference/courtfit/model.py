@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from inference.camera import Camera
 from inference.court import Court
 
 MIN_SEARCH_LENGTH_M = 2.0
@@ -104,9 +105,9 @@ def court_lines(court: Court) -> CourtLines:
                       tuple(ModelLine("longitudinal", x) for x in sorted(longi)), raised, structure)
 
 
-def court_line_samples(cam, court: Court, step_m: float = 0.1) -> np.ndarray:
-    """(P, 2) full-resolution pixels of the court's floor lines inside the image of ``cam``
-    (:class:`~inference.camera.Camera`), one every ``step_m`` metres of line."""
+def court_line_samples(cam: Camera, court: Court, step_m: float = 0.1) -> np.ndarray:
+    """(P, 2) full-resolution pixels of the court's floor lines inside the image of ``cam``, one every
+    ``step_m`` metres of line."""
     model = court_lines(court)
     pts, _ = model.samples(step_m)
     px = cam.project(np.concatenate([pts, np.zeros((len(pts), 1))], axis=1))

@@ -11,7 +11,7 @@ which the simulator's tennis serves were fitted to). Only the labelled stretch c
 last event, ±``margin_s``): the server's bounces before the serve are not labelled. A clip's first event,
 when it is the far player's hit, is a far serve and counts apart (``serve_far``): a real broadcast tracker
 loses the far server's toss against the crowd, so the far serve hides in a long gap that lies mostly
-before the contact (RG2025: 77 % of the far serves, median 0.5 s, 81 % of it before the hit); the near
+before the contact (RG2025: 79 % of the far serves, median 0.47 s, 82 % of it before the hit); the near
 server's toss stays in view (its serve counts with the near hits).
 
 Example:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from inference.clipio import BallTrack, HitEvents
+from inference.events.gaps import gap_around
 from training.events.degrade import DegradeConfig, degrade, degrade_all
 from training.events.real_stats import degrade_from, measure
 from training.events.simulate import simulate_clip
@@ -29,16 +30,6 @@ def far_serves():
     return out
 
 
-def _gap_around(visible: np.ndarray, f: int) -> tuple[int, int]:
-    a = f
-    while a > 0 and not visible[a - 1]:
-        a -= 1
-    b = f
-    while b < len(visible) - 1 and not visible[b + 1]:
-        b += 1
-    return a, b
-
-
 def test_far_serve_hides_in_a_gap_mostly_before_the_contact(far_serves):
     cfg = DegradeConfig(**OFF, p_serve_gap_far=1.0, serve_gap_s=(0.4, 0.6), serve_before=(0.7, 0.9))
     for k, c in enumerate(far_serves):
@@ -46,7 +37,7 @@ def test_far_serve_hides_in_a_gap_mostly_before_the_contact(far_serves):
         d = degrade(c, np.random.default_rng(k), cfg)
         seen = d.track.visibility > 0
         assert not seen[serve]
-        a, b = _gap_around(seen, serve)
+        a, b = gap_around(seen, serve, reach=0)
         length = b - a + 1
         assert 0.4 * c.fps - 1 <= length <= 0.6 * c.fps + 1  # 20–30 frames at 50 fps
         assert 0.6 <= (serve - a) / length <= 0.95  # the toss: most of the gap before the hit
