@@ -4,7 +4,7 @@
 or ``auto``: the rectangles are found from the pixels that stay constant while the rest of the picture
 changes (:func:`find_static_overlays`) and written to ``mask_auto.yaml`` (rectangles, editable) and
 ``mask_auto.jpg`` (a frame with them drawn) for the user to check; an existing ``mask_auto.yaml`` is used
-as it stands, so a corrected file wins. The ball detector, the shot split and the automatic court fit see
+as it stands, so a corrected file wins. The ball detector, the scene split and the automatic court fit see
 those pixels filled with one flat colour, so a scoreboard's digits give no ball candidates and its edges no
 court lines.
 

@@ -205,7 +205,7 @@ def standard_rate(rate: float | None, tolerance: float = RATE_MATCH) -> float | 
 
 
 def nominal_rate(candidates: list[float | None], times_s: np.ndarray) -> float | None:
-    """The rate the frames were shot at, whatever frames are missing or doubled.
+    """The rate the frames were filmed at, whatever frames are missing or doubled.
 
     The first of ``candidates`` (the stream's ``r_frame_rate``, then its guessed rate) that is a standard rate
     and that the typical frame interval confirms (within :data:`VFR_TOLERANCE`); else, when the intervals are
@@ -335,7 +335,7 @@ class PictureRepeats:
 def repeat_pattern(diffs: np.ndarray, fps: float) -> tuple[int, int, int] | None:
     """``(period, phase, repeats found)`` of the frames that repeat the one before on a regular beat, from the
     (N-1,) mean absolute differences of consecutive frames (``diffs[i]``: frame i+1 against frame i); None
-    when there is no such beat (a still shot, irregular repeats) or the content rate it gives is no
+    when there is no such beat (a still picture, irregular repeats) or the content rate it gives is no
     standard rate."""
     d = np.asarray(diffs, float)
     moving = d[d > 0]

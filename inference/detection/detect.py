@@ -266,12 +266,12 @@ class BallDetectorRunner:
 
         With ``tolerate_truncation`` a video that stops decoding early yields the frames before the damage
         (``result.truncated`` says why) instead of raising :class:`FormatError`. ``active`` (N,) bool: only
-        these frames are searched (court-view shots, :mod:`inference.shots`); each run of active frames is
+        these frames are searched (court-view scenes, :mod:`inference.scenes`); each run of active frames is
         windowed and tracked on its own, the other frames have no candidates and no ball.
         """
         from tqdm import tqdm
 
-        from inference.shots import segments
+        from inference.scenes import segments
 
         t0 = time.perf_counter()
         info = clip.info

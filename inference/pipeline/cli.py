@@ -5,7 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-STAGE_NAMES = ("camera", "shots", "detect", "smooth", "players", "events", "reconstruct")
+STAGE_NAMES = ("camera", "scenes", "detect", "smooth", "players", "events", "reconstruct")
+#: former stage names --only still takes (deprecated), and the stage each now is
+STAGE_ALIASES = {"shots": "scenes"}  # the scenes stage (between the editor's cuts) before issue 43
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -99,17 +101,30 @@ def _expand(args: argparse.Namespace) -> list[tuple[Path, Path | None]]:
     return items
 
 
+def _only_stages(text: str | None) -> set[str] | None:
+    """The stages ``--only`` names (None: all); a former name (:data:`STAGE_ALIASES`) is taken with a note on
+    stderr; ValueError for an unknown one."""
+    if not text:
+        return None
+    names = set(text.split(","))
+    for old in sorted(names & set(STAGE_ALIASES)):
+        print(f"rally3d infer: note: stage '{old}' is now called '{STAGE_ALIASES[old]}' (the old name is "
+              "deprecated)", file=sys.stderr)
+    names = {STAGE_ALIASES.get(n, n) for n in names}
+    unknown = sorted(names - set(STAGE_NAMES))
+    if unknown:
+        raise ValueError(f"unknown stages {unknown}; choose from {', '.join(STAGE_NAMES)}")
+    return names
+
+
 def run(args: argparse.Namespace) -> int:
     cfg = _config(args)
     items = _expand(args)
     if not items:
         raise ValueError("no clips to run (empty dataset or split)")
-    if args.only:
-        unknown = sorted(set(args.only.split(",")) - set(STAGE_NAMES))
-        if unknown:
-            raise ValueError(f"unknown stages {unknown}; choose from {', '.join(STAGE_NAMES)}")
+    only = _only_stages(args.only)
     if len(items) == 1:
-        return _run_one(items[0], cfg, args)
+        return _run_one(items[0], cfg, args, only)
     if args.start is not None or args.end is not None:
         raise ValueError("--start/--end cut one video; give a single input")
     if args.mask:
@@ -128,7 +143,8 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> int:
+def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace,
+             only: set[str] | None = None) -> int:
     from inference.clipio import Clip
 
     from .prepare import Cut, prepare, request_auto_mask, video_notes
@@ -144,7 +160,6 @@ def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace) -> i
           f"{clip.n_frames} frames)")
     for note in video_notes(clip.root if "cut" not in clip.info.extra else source):
         print(f"rally3d infer: note: {note}")
-    only = set(args.only.split(",")) if args.only else None
     report = run_pipeline(clip, cfg, only=only)
     print()
     print(report.table())

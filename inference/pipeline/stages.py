@@ -4,11 +4,12 @@ Each stage declares the files it reads (its *inputs*, fingerprinted for resuming
 files it writes. A stage that cannot run says why: :class:`Skip` (an optional input is absent — e.g. no
 calibration, no pose backend) or :class:`StageError` (bad input: the message names the file and the fix).
 
-Order: camera → shots → detect → smooth → players → events → reconstruct. The camera comes first because it
+Order: camera → scenes → detect → smooth → players → events → reconstruct. The camera comes first because it
 is cheap and a calibration that does not fit the video must stop the run before the expensive detection; the
 players come before the events so that the player-aware event model can read them (without players, or
-with ``--pose none``, it runs on the ball alone). Every stage after ``shots`` leaves the frames outside its
-court-view shots (``shots.json``: close-ups, replays) out: no ball, player row, event or 3D point there.
+with ``--pose none``, it runs on the ball alone). Every stage after ``scenes`` leaves the frames outside its
+court-view scenes (``scenes.json``: close-ups, replays between the editor's cuts) out: no ball, player row,
+event or 3D point there.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import numpy as np
 from inference.clipio import BallTrack, Clip
 from inference.court import Court
 
-from .state import STATE_DIR, RunState
+from .state import STATE_DIR, RunState, backup_file
 
 
 class Skip(Exception):
@@ -180,61 +181,80 @@ def _camera_outputs(ctx: Context) -> list[Path]:
     return [] if ctx.given_camera() or not computed else [ctx.clip.camera_path]
 
 
-# -------------------------------------------------------------------------------------------- shots
-def _shots_run(ctx: Context) -> Outcome:
-    from inference.shots import find_shots
-
+# ------------------------------------------------------------------------------------------- scenes
+def _scenes_run(ctx: Context) -> Outcome:
     from inference.clipio import FormatError
-    from inference.shots import Shot, ShotReport
+    from inference.scenes import LEGACY_FILE, Scene, SceneReport, find_scenes
 
     clip = ctx.clip
+    # a folder from before scenes.json had its name: its old file is replaced, unless made by hand (kept, as
+    # every file the pipeline did not write)
+    legacy = clip.root / LEGACY_FILE
+    if legacy.is_file() and not ctx.state.written_by_pipeline(legacy):
+        if not ctx.cfg.overwrite:
+            raise StageError(f"{legacy} (the former name of scenes.json) was not written by rally3d infer — "
+                             "rename it scenes.json to keep it, or pass --overwrite to replace it (a backup is "
+                             f"kept in {STATE_DIR}/backup/)")
+        backup_file(clip.root, legacy)
     camera = clip.read_camera() if clip.camera_path.is_file() else None
     try:
-        report = find_shots(clip, camera, ctx.court, progress=ctx.cfg.progress)
+        report = find_scenes(clip, camera, ctx.court, progress=ctx.cfg.progress)
     except FormatError as e:  # a damaged video: no cut search, every frame goes on (detect keeps what decodes)
-        report = ShotReport([Shot(0, clip.n_frames, True, 0.0, "not measured")], clip.n_frames, clip.info.fps,
-                            [f"shots not measured ({e}); every frame is searched"])
-    if len(report.shots) > 1 or report.notes:
-        print("[shots]\n" + report.table())  # the terminal's view of shots.json
-    report.write(_shots_path(ctx))
+        report = SceneReport([Scene(0, clip.n_frames, True, 0.0, "not measured")], clip.n_frames, clip.info.fps,
+                             [f"scenes not measured ({e}); every frame is searched"])
+    if len(report.scenes) > 1 or report.notes:
+        print("[scenes]\n" + report.table())  # the terminal's view of scenes.json
+    report.write(_scenes_output(ctx))
+    legacy.unlink(missing_ok=True)
     return Outcome(report.n_frames, report.summary())
 
 
-def _shots_path(ctx: Context) -> Path:
-    return ctx.clip.root / "shots.json"
+def _scenes_output(ctx: Context) -> Path:
+    """scenes.json, what the scenes stage writes."""
+    from inference.scenes import SCENES_FILE
+
+    return ctx.clip.root / SCENES_FILE
+
+
+def _scenes_path(ctx: Context) -> Path:
+    """The scenes file the later stages read: scenes.json (in a folder from before that name, with only the
+    old file, that one: :func:`inference.scenes.scenes_file`)."""
+    from inference.scenes import scenes_file
+
+    return scenes_file(ctx.clip.root)
 
 
 def _court_frames(ctx: Context) -> np.ndarray | None:
-    """(N,) bool court-view frames from shots.json (None: no shots.json, every frame is processed)."""
-    from inference.shots import ShotReport
+    """(N,) bool court-view frames from scenes.json (None: no scenes.json, every frame is processed)."""
+    from inference.scenes import SceneReport
 
-    if not _shots_path(ctx).is_file():
+    if not _scenes_path(ctx).is_file():
         return None
-    report = ShotReport.read(_shots_path(ctx))
+    report = SceneReport.read(_scenes_path(ctx))
     if report.n_frames != ctx.clip.n_frames:
-        raise StageError(f"{_shots_path(ctx)} describes {report.n_frames} frames, the video has "
-                         f"{ctx.clip.n_frames} — delete it and re-run (the shots stage rewrites it)")
+        raise StageError(f"{_scenes_path(ctx)} describes {report.n_frames} frames, the video has "
+                         f"{ctx.clip.n_frames} — delete it and re-run (the scenes stage rewrites it)")
     return report.active()
 
 
 def _cut_frames(ctx: Context) -> list[int]:
-    """The first frame of every shot after the first (shots.json; [] without it): no flight is smoothed
+    """The first frame of every scene after the first (scenes.json; [] without it): no flight is smoothed
     across a cut."""
-    from inference.shots import ShotReport
+    from inference.scenes import SceneReport
 
     if _court_frames(ctx) is None:
         return []
-    return [s.start for s in ShotReport.read(_shots_path(ctx)).shots[1:]]
+    return [s.start for s in SceneReport.read(_scenes_path(ctx)).scenes[1:]]
 
 
 def _court_spans(ctx: Context) -> list[tuple[int, int]] | None:
-    """The court-view shots ``[(start, stop), ...]`` that the events and 3D stages handle one by one (None: no
-    shots.json or a single view of the whole clip — the clip is handled whole, as without shots)."""
-    from inference.shots import ShotReport
+    """The court-view scenes ``[(start, stop), ...]`` that the events and 3D stages handle one by one (None: no
+    scenes.json or a single view of the whole clip — the clip is handled whole, as without scenes)."""
+    from inference.scenes import SceneReport
 
     if _court_frames(ctx) is None:
         return None
-    spans = ShotReport.read(_shots_path(ctx)).court_spans()
+    spans = SceneReport.read(_scenes_path(ctx)).court_spans()
     return None if spans == [(0, ctx.clip.n_frames)] else spans
 
 
@@ -268,7 +288,7 @@ def _detect_run(ctx: Context) -> Outcome:
     seen = int(np.sum(result.track.visibility > 0))
     note = f"ball in {seen}/{result.n_frames} frames"
     if active is not None and not active.all():
-        note += f" ({int((~active).sum())} frames outside court views not searched, shots.json)"
+        note += f" ({int((~active).sum())} frames outside court views not searched, {_scenes_path(ctx).name})"
     if ctx.cfg.detector_weights is None:
         from inference.detection.detect import SHIPPED_SPORT, shipped_weights
 
@@ -326,12 +346,12 @@ def _events_run(ctx: Context) -> Outcome:
         if spans is None:
             result = det.predict(clip.read_ball(), clip.info.fps, clip.info.width, clip.info.height, camera=camera,
                                  players=pl, frames=frames, keep_all=not ctx.cfg.rally_only)
-        else:  # a broadcast clip: each court-view shot on its own, no event window across a cut
-            from .per_shot import events_per_shot
+        else:  # a broadcast clip: each court-view scene on its own, no event window across a cut
+            from .per_scene import events_per_scene
 
-            result = events_per_shot(det, clip.read_ball(), spans, clip.n_frames, clip.info.fps, clip.info.width,
-                                     clip.info.height, camera=camera, players=pl, frames=frames,
-                                     keep_all=not ctx.cfg.rally_only)
+            result = events_per_scene(det, clip.read_ball(), spans, clip.n_frames, clip.info.fps, clip.info.width,
+                                      clip.info.height, camera=camera, players=pl, frames=frames,
+                                      keep_all=not ctx.cfg.rally_only)
     finally:
         frames.close()
     clip.write_events(result.events_with_timing())  # + confidence, sigma_frames (docs/formats.md §9)
@@ -351,7 +371,7 @@ def _events_run(ctx: Context) -> Outcome:
     unsure = result.unsure()
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
                    ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + f"; {model})" +
-                   (f" in {len(spans)} court-view shots" if spans is not None else "") + rally +
+                   (f" in {len(spans)} court-view scenes" if spans is not None else "") + rally +
                    (f"; check: {unsure}" if unsure else ""))
 
 
@@ -392,7 +412,7 @@ def _events_inputs(ctx: Context) -> dict[str, Path | None]:
     weights = _events_weights(ctx)
     players = ctx.clip.players_path if model_wants_players(weights) else None  # read only by player-aware models
     return {"ball": ctx.clip.ball_path, "camera": ctx.clip.root / "camera.yaml", "weights": weights,
-            "players": players, "shots": _shots_path(ctx)}
+            "players": players, "scenes": _scenes_path(ctx)}
 
 
 # ------------------------------------------------------------------------------------------ players
@@ -420,7 +440,7 @@ def _players_run(ctx: Context) -> Outcome:
     clip.write_players(players)
     note = f"{len(players.ids())} players"
     if active is not None and not active.all():
-        note += f" ({int((~active).sum())} frames outside court views not searched, shots.json)"
+        note += f" ({int((~active).sum())} frames outside court views not searched, {_scenes_path(ctx).name})"
     return Outcome(len(poses) if active is None else int(active.sum()), note)
 
 
@@ -449,15 +469,15 @@ def _reconstruct_run(ctx: Context) -> Outcome:
     spans = _court_spans(ctx)
     if spans is None:
         fit = reconstruct(obs, ctx.cfg.method)
-    else:  # a broadcast clip: each court-view shot fitted on its own, no flight across a cut
-        from .per_shot import reconstruct_per_shot
+    else:  # a broadcast clip: each court-view scene fitted on its own, no flight across a cut
+        from .per_scene import reconstruct_per_scene
 
-        fit = reconstruct_per_shot(obs, spans, ctx.cfg.method)
+        fit = reconstruct_per_scene(obs, spans, ctx.cfg.method)
     fit.save(clip)
     ok = sum(s.ok for s in fit.segments)
     if ok == 0:
         reasons = "; ".join(sorted({s.reason for s in fit.segments if not s.ok})) or \
-            "no event in any court-view shot of shots.json"
+            f"no event in any court-view scene of {_scenes_path(ctx).name}"
         raise StageError(f"{clip.root}: no flight could be reconstructed ({reasons}) — check ball.csv and events.csv")
     # flights that cannot be fitted (too few detections between two events) are normal in a real rally: they
     # are listed in segments.json with their reason, and the run still counts as complete
@@ -466,7 +486,7 @@ def _reconstruct_run(ctx: Context) -> Outcome:
                                  f", NOT plausible ({'; '.join(pl.get('not_plausible_because', []))})")
     shift = f"; 2D stabilised by {_camera_track_path(ctx).name}" if stabilised else ""
     if spans is not None:
-        shift += f"; {len(spans)} court-view shots fitted apart (shots.json)"
+        shift += f"; {len(spans)} court-view scenes fitted apart ({_scenes_path(ctx).name})"
     return Outcome(fit.n_frames, f"{ok}/{len(fit.segments)} flights reconstructed{verdict}{shift}")
 
 
@@ -486,24 +506,24 @@ def build_stages() -> list[Stage]:
         Stage("camera", _camera_inputs,
               lambda ctx: {"court": str(ctx.clip.court_path()), "auto": ctx.cfg.auto_court}, _camera_outputs,
               _camera_run),
-        Stage("shots", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "clip_yaml": ctx.clip.clip_yaml_path},
-              lambda ctx: {"shots": 1}, lambda ctx: [_shots_path(ctx)], _shots_run),
-        Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx), "shots": _shots_path(ctx),
+        Stage("scenes", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "clip_yaml": ctx.clip.clip_yaml_path},
+              lambda ctx: {"scenes": 1}, lambda ctx: [_scenes_output(ctx)], _scenes_run),
+        Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx), "scenes": _scenes_path(ctx),
                                      "clip_yaml": ctx.clip.clip_yaml_path, "mask": ctx.clip.root / "mask_auto.yaml"},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
               lambda ctx: [ctx.detected_path], _detect_run),
-        Stage("smooth", lambda ctx: {"detected": ctx.detected_path, "shots": _shots_path(ctx)},
+        Stage("smooth", lambda ctx: {"detected": ctx.detected_path, "scenes": _scenes_path(ctx)},
               lambda ctx: {"smoother": "rts-v2-detections-only"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model,
-                                      "shots": _shots_path(ctx)},
+                                      "scenes": _scenes_path(ctx)},
               lambda ctx: {"pose": ctx.cfg.pose}, _players_outputs, _players_run),
         Stage("events", _events_inputs, lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),
         Stage("reconstruct", lambda ctx: {"ball": ctx.clip.ball_path, "events": ctx.clip.events_path,
                                           "camera": camera(ctx), "players": ctx.clip.players_path,
-                                          "camera_track": _camera_track_path(ctx), "shots": _shots_path(ctx)},
+                                          "camera_track": _camera_track_path(ctx), "scenes": _scenes_path(ctx)},
               lambda ctx: {"method": ctx.cfg.method},
               lambda ctx: [ctx.clip.ball_3d_path, ctx.clip.segments_path], _reconstruct_run,
               requires=("events",)),

@@ -92,13 +92,13 @@ def test_infer_mask_auto_writes_clip_yaml_with_a_backup(broadcast, tmp_path, cap
     text = (clip.root / "clip.yaml").read_text().replace("mask: auto\n", "")
     (clip.root / "clip.yaml").write_text(text)
     (clip.root / AUTO_FILE).unlink(missing_ok=True)
-    assert main(["infer", str(clip.root), "--mask", "auto", "--only", "shots", "--no-progress"]) == 0
+    assert main(["infer", str(clip.root), "--mask", "auto", "--only", "scenes", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "mask: auto written to" in out
     assert Clip(clip.root).info.extra["mask"] == "auto"
     backups = list((clip.root / ".rally3d" / "backup").glob("clip.yaml*"))
     assert len(backups) == 1 and "mask" not in backups[0].read_text()
-    assert (clip.root / AUTO_FILE).is_file() and (clip.root / "shots.json").is_file()  # the shots stage masked
+    assert (clip.root / AUTO_FILE).is_file() and (clip.root / "scenes.json").is_file()  # the scenes stage masked
     (clip.root / "clip.yaml").write_text(text + "mask:\n  - [0.1, 0.1, 0.2, 0.2]\n")
     request_auto_mask(Clip(clip.root), log=print)
     assert "has its own mask rectangles" in capsys.readouterr().out

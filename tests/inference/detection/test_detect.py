@@ -128,7 +128,7 @@ def test_4k_mov_is_downscaled_for_the_network_and_answers_in_4k_pixels(tmp_path)
 
 
 def test_only_active_frames_are_searched_and_tracks_stop_at_cuts(clip):
-    """``active`` (court-view shots): frames outside get no candidates and no ball; no track crosses the gap."""
+    """``active`` (court-view scenes): frames outside get no candidates and no ball; no track crosses the gap."""
     active = np.ones(clip.n_frames, bool)
     active[25:35] = False
     result = BallDetectorRunner(YellowNet(), normalize="unit", batch_size=8).run(clip, active=active)

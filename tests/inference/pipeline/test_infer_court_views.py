@@ -1,6 +1,6 @@
-"""Every stage after ``shots`` leaves the frames of non-court shots alone: a generated tennis rally with a cut
-to a zoomed close-up gets no player rows, no ball, no event and no 3D there — even from a pose backend and a
-ball detector that report something in every frame of the clip (as real ones do in a close-up)."""
+"""Every stage after ``scenes`` leaves the frames of scenes without the court alone: a generated tennis rally
+with a cut to a zoomed close-up gets no player rows, no ball, no event and no 3D there — even from a pose
+backend and a ball detector that report something in every frame of the clip (as real ones do in a close-up)."""
 from __future__ import annotations
 
 import shutil
@@ -82,7 +82,7 @@ def test_no_player_ball_event_or_3d_in_a_close_up(rally, tmp_path, monkeypatch):
     import inference.players.backends as backends
     from inference.pipeline.run import run_pipeline
     from inference.pipeline.stages import PipelineConfig
-    from inference.shots import Shot, ShotReport
+    from inference.scenes import Scene, SceneReport
 
     root = tmp_path / "clip"
     shutil.copytree(rally, root)
@@ -93,12 +93,12 @@ def test_no_player_ball_event_or_3d_in_a_close_up(rally, tmp_path, monkeypatch):
                         classmethod(lambda cls, *a, **k: EveryFrameBall(truth)))
     report = run_pipeline(clip, PipelineConfig(progress=False, pose="every-frame"))
     status = {s.name: s.status for s in report.stages}
-    done = ("shots", "detect", "smooth", "players", "events")
+    done = ("scenes", "detect", "smooth", "players", "events")
     assert all(status[s] == "done" for s in done), report.table()
 
-    shots = ShotReport.read(root / "shots.json")
-    assert [(s.start, s.stop, s.court_view) for s in shots.shots] == \
-        [(0, CLOSE[0], True), (*CLOSE, False), (CLOSE[1], N, True)], shots.table()
+    scenes = SceneReport.read(root / "scenes.json")
+    assert [(s.start, s.stop, s.court_view) for s in scenes.scenes] == \
+        [(0, CLOSE[0], True), (*CLOSE, False), (CLOSE[1], N, True)], scenes.table()
     close = np.zeros(N, bool)
     close[CLOSE[0]:CLOSE[1]] = True
 
@@ -117,8 +117,8 @@ def test_no_player_ball_event_or_3d_in_a_close_up(rally, tmp_path, monkeypatch):
     assert status["reconstruct"] == "done", report.table()
     assert len(clip.read_ball_3d()) and not close[clip.read_ball_3d().frame].any()
 
-    # players.csv follows shots.json: a new split re-runs the players stage
-    ShotReport([shots.shots[0], Shot(CLOSE[0], N, True, 1.0, "court lines")], N, 30.0).write(root / "shots.json")
+    # players.csv follows scenes.json: a new split re-runs the players stage
+    SceneReport([scenes.scenes[0], Scene(CLOSE[0], N, True, 1.0, "court lines")], N, 30.0).write(root / "scenes.json")
     report = run_pipeline(clip, PipelineConfig(progress=False, pose="every-frame"), only={"players"})
     assert next(s.status for s in report.stages if s.name == "players") == "done", report.table()
     assert close[clip.read_players().frame].any()

@@ -1,13 +1,13 @@
-"""The events and 3D stages over the court-view shots of a broadcast clip (``shots.json``).
+"""The events and 3D stages over the court-view scenes of a broadcast clip (``scenes.json``).
 
 Across a cut the time is not continuous (a replay or a close-up sits between two court views), so each
-court-view shot is handled as a clip of its own — its ball track, events and players cut out and renumbered
-from 0 (:func:`inference.shots.shot_rows`) — and the results are put back at the shot's frames. Frames
-outside court views get no events and no 3D (segments.json's ``shots`` says why).
+court-view scene is handled as a clip of its own — its ball track, events and players cut out and renumbered
+from 0 (:func:`inference.scenes.scene_rows`) — and the results are put back at the scene's frames. Frames
+outside court views get no events and no 3D (segments.json's ``scenes`` says why).
 
 Example:
-    >>> result = events_per_shot(detector, ball, spans, n_frames, fps, width, height)
-    >>> fit = reconstruct_per_shot(obs, spans, "joint")
+    >>> result = events_per_scene(detector, ball, spans, n_frames, fps, width, height)
+    >>> fit = reconstruct_per_scene(obs, spans, "joint")
 """
 from __future__ import annotations
 
@@ -16,13 +16,13 @@ import dataclasses
 import numpy as np
 
 from inference.clipio import BallTrack, HitEvents
-from inference.shots import shot_rows
+from inference.scenes import scene_rows
 
 #: segments.json's reason for frames outside the court views
-LEFT_OUT = "not reconstructed: outside a court view (a replay, close-up or other camera; shots.json)"
+LEFT_OUT = "not reconstructed: outside a court view (a replay, close-up or other camera; scenes.json)"
 
 
-class ShotFrames:
+class SceneFrames:
     """Frames ``start .. stop-1`` of a frame source, numbered from 0 (what a crop event model reads)."""
 
     def __init__(self, source, start: int, stop: int):
@@ -39,9 +39,9 @@ class ShotFrames:
         return self.source.read(self.start + int(i))
 
 
-def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames: int, fps: float, width: int,
+def events_per_scene(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames: int, fps: float, width: int,
                     height: int, *, camera=None, players=None, frames=None, keep_all: bool = True):
-    """:meth:`EventDetector.predict` on each court-view shot ``(start, stop)`` of ``spans``, the events put
+    """:meth:`EventDetector.predict` on each court-view scene ``(start, stop)`` of ``spans``, the events put
     back at clip frames; the point (rally.yaml) is segmented once over the whole clip from all the events.
 
     Returns:
@@ -57,12 +57,12 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
     probs[:, 0] = 1.0
     ev_f, ev_l, coarse, sigma, conf = [], [], [], [], []
     for a, b in spans:
-        sub = shot_rows(ball, a, b)
+        sub = scene_rows(ball, a, b)
         if not np.any(sub.visibility > 0):  # no ball in this view: nothing to decode
             continue
         r = det.predict(sub, fps, width, height, camera=camera,
-                        players=shot_rows(players, a, b) if players is not None else None,
-                        frames=ShotFrames(frames, a, b) if frames is not None else None, n_frames=b - a)
+                        players=scene_rows(players, a, b) if players is not None else None,
+                        frames=SceneFrames(frames, a, b) if frames is not None else None, n_frames=b - a)
         probs[a:b] = r.probs
         ev_f.append(r.events.frame + a)
         ev_l.append(r.events.event)
@@ -86,13 +86,13 @@ def events_per_shot(det, ball: BallTrack, spans: list[tuple[int, int]], n_frames
                        tuple(c for c, k in zip(coarse, keep) if k), seg, outside, unc[keep], cf[keep])
 
 
-def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frames: int | None = None):
-    """:func:`inference.reconstruct.api.reconstruct` on each court-view shot of ``spans`` on its own; the
+def reconstruct_per_scene(obs, spans: list[tuple[int, int]], method: str, n_frames: int | None = None):
+    """:func:`inference.reconstruct.api.reconstruct` on each court-view scene of ``spans`` on its own; the
     flights come back at clip frames (a flight's ``index`` stays that of the clip's event it starts from, so
-    the run-out of one shot and the run-in of the next share the index of the flight the cut broke).
+    the run-out of one scene and the run-in of the next share the index of the flight the cut broke).
 
     Returns:
-        a :class:`~inference.reconstruct.results.RallyFit` whose ``extra["shots"]`` lists every shot (court
+        a :class:`~inference.reconstruct.results.RallyFit` whose ``extra["scenes"]`` lists every scene (court
         view or not, flights, reason when none) and whose plausibility covers the whole clip.
     """
     from inference.reconstruct.api import reconstruct
@@ -101,19 +101,19 @@ def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frame
     from inference.reconstruct.results import RallyFit
 
     n_frames = obs.n_frames if n_frames is None else n_frames
-    segs, shots, iterations, refits = [], [], [], []
+    segs, scenes, iterations, refits = [], [], [], []
     seconds = cpu = 0.0
     for a, b in spans:
         m = (obs.event_frames >= a) & (obs.event_frames < b)
-        first = int(np.sum(obs.event_frames < a))  # the clip's index of the shot's first event
+        first = int(np.sum(obs.event_frames < a))  # the clip's index of the scene's first event
         entry = {"start_frame": a, "end_frame": b - 1, "court_view": True, "events": int(m.sum())}
-        shots.append(entry)
+        scenes.append(entry)
         if not m.any():
-            entry.update(flights=0, reason="no events in this shot: nothing anchors a flight")
+            entry.update(flights=0, reason="no events in this scene: nothing anchors a flight")
             continue
         sub = Observations(obs.court, obs.camera, obs.fps, obs.uv[a:b], obs.event_frames[m] - a,
                            [lab for lab, k in zip(obs.event_labels, m) if k],
-                           shot_rows(obs.players, a, b) if obs.players is not None else None, obs.source,
+                           scene_rows(obs.players, a, b) if obs.players is not None else None, obs.source,
                            obs.pixel_sigma)
         fit = reconstruct(sub, method)
         for s in fit.segments:
@@ -122,7 +122,7 @@ def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frame
             segs.append(dataclasses.replace(s, segment=seg, frames=s.frames + a))
         entry.update(flights=len(fit.segments), reconstructed=sum(s.ok for s in fit.segments))
         if not fit.segments:
-            entry["reason"] = f"{int(m.sum())} event(s) in this shot: no flight between two events"
+            entry["reason"] = f"{int(m.sum())} event(s) in this scene: no flight between two events"
         seconds += fit.seconds
         cpu += fit.cpu_seconds or 0.0
         iterations += fit.extra.get("iterations", [])
@@ -132,11 +132,11 @@ def reconstruct_per_shot(obs, spans: list[tuple[int, int]], method: str, n_frame
     for a, b in zip(edges[:-1], edges[1:]):
         if a not in court:
             n_ev = int(np.sum((obs.event_frames >= a) & (obs.event_frames < b)))
-            shots.append({"start_frame": a, "end_frame": b - 1, "court_view": False, "events": n_ev, "flights": 0,
-                          "reason": LEFT_OUT})
-    shots.sort(key=lambda e: e["start_frame"])
+            scenes.append({"start_frame": a, "end_frame": b - 1, "court_view": False, "events": n_ev, "flights": 0,
+                           "reason": LEFT_OUT})
+    scenes.sort(key=lambda e: e["start_frame"])
     out = RallyFit(method, obs.fps, segs, seconds, cpu_seconds=cpu,
-                   extra={"shots": shots, **({"iterations": iterations} if iterations else {}),
+                   extra={"scenes": scenes, **({"iterations": iterations} if iterations else {}),
                           **({"refits": refits} if refits else {})})
     out.extra["plausibility"] = summary(out, obs, _rms_limit(method, obs))
     return out
