@@ -79,7 +79,8 @@ class RallyParams:
             ±3 frames on degraded tracks 38 → 49 % on the tuning rallies, the rest unchanged; with the HitNets
             it costs 11–31 points, so they leave it off).
         serve_bounce: the sport's serve bounces first (padel); serve_bounce_s: how long before the serve.
-        gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it;
+        gap_s: a gap this long ends the point; max_flight_s: no event for this long after an event ends it
+            (the frames of a lob above the picture not counted);
         dead_s: the ball is dead this long after the last event when the track goes on.
         resume_s: an end is undone when, within this long after it, the ball lands in the other half (a rules'
             end) or a run of ``chain_hits`` alternating hits starts.
@@ -209,21 +210,28 @@ def rally_end(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labels
     halves are not: a hit between them was missed), or, when the events stop (a gap of
     ``gap_s``, no event for ``max_flight_s``), where the ball is lost, stands still or ``dead_s`` later."""
     T = len(xy)
-    seen = np.isfinite(xy).all(axis=1) | above_picture(xy, params.edge)  # a lob above the view is in play
+    above = above_picture(xy, params.edge)
+    seen = np.isfinite(xy).all(axis=1) | above  # a lob above the view is in play
     gap = max(1, int(round(params.gap_s * fps)))
     max_flight = int(round(params.max_flight_s * fps))
+    # the time a lob spends above the picture does not count against the longest flight: a real padel lob
+    # flies up to ~3.7 s hit to hit, 1.7 s of it above a broadcast's top edge
+    shown = np.r_[0, np.cumsum(~above)]
+
+    def too_long(a: int, b: int) -> bool:
+        return int(shown[b] - shown[a]) > max_flight
     k = int(np.searchsorted(frames, start, side="left"))
     if land is not None and sides is not None:
         i = rule_end(frames, labels, land, k, hits, sides, int(round(params.resume_s * fps)))
         if i is not None and not any(_gap_between(seen, int(frames[j - 1]) if j > k else start, int(frames[j]), gap)
-                                     or frames[j] - (frames[j - 1] if j > k else start) > max_flight
+                                     or too_long(int(frames[j - 1]) if j > k else start, int(frames[j]))
                                      for j in range(k, i + 1)):
             return int(frames[i]), i + 1
     last, bounces, half = k, 0, None  # events [.., last) are in the rally; half: of the last bounce, if known
     while last < len(frames):
         f = int(frames[last])
         prev = int(frames[last - 1]) if last > k else start
-        if f - prev > max_flight or _gap_between(seen, prev, f, gap):
+        if too_long(prev, f) or _gap_between(seen, prev, f, gap):
             break
         last += 1
         if labels[last - 1] in hits:
@@ -652,7 +660,7 @@ def serve_setup(xy: np.ndarray, fps: float, start: int, frames: np.ndarray, labe
         return False
     p = _scaled(xy, aspect)
     before = p[a:start]
-    seen = np.isfinite(before).all(axis=1)
+    seen = np.isfinite(before).all(axis=1) | above_picture(xy, params.edge)[a:start]  # a lob is no pause
     if seen.mean() < 0.4:
         return True                                         # a pause: the ball out of sight before the serve
     if held_still(p, fps, params)[a:start].any():
