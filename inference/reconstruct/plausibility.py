@@ -190,11 +190,42 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
         speed = float(np.linalg.norm(sol.theta[f.vel]))
         if f.end is not None and speed > cfg.max_speed_ms:     # a free end's speed is pinned by its track alone
             reasons.append(f"launched at {3.6 * speed:.0f} km/h (> {3.6 * cfg.max_speed_ms:.0f} km/h)")
+        gained = bounce_gain(problem, sol, s)
+        if gained is not None:
+            reasons.append(gained)
         for c in judged.get(s, ()):  # its racket hits: where a player struck it, how high, how fast it left
             leaving = speed if c == f.start and f.end is not None and not f.lead_in else None
             reasons += limits.problems(court, ch.point(sol.theta, c), ch.contacts[c].label, leaving)
         out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e), deepest[0]))
     return out
+
+
+#: a rebound may leave its surface at most this much faster (m/s, along the normal) than the material's
+#: restitution gives for the incoming speed, beyond its 3-σ spread: a bounce does not add energy
+BOUNCE_GAIN_MARGIN_MS = 1.0
+
+
+def bounce_gain(problem: Problem, sol: Solution, s: int) -> str | None:
+    """Why flight ``s`` cannot leave the floor/glass bounce it starts from — it leaves the surface faster than
+    any rebound of its incoming flight (restitution × the incoming normal speed, + 3 σ + the margin) — or None.
+    The fit's impact model leaves a grazing arrival free (it models balls moving into the surface): a refit
+    may put a skimming 'bounce' where a player hit the ball; the ball then leaves it at a racket's speed."""
+    ch = problem.chain
+    f = ch.flights[s]
+    ct = ch.contacts[f.start]
+    if f.lead_in or ct.material is None or ct.normal is None:
+        return None
+    inc = problem.incoming(sol.theta, sol.aux["flights"], sol.aux["taus"], f.start)
+    if inc is None:
+        return None
+    v_in = max(0.0, -float(inc[1] @ ct.normal))                  # m/s into the surface
+    v_out = float(sol.theta[f.vel] @ ct.normal)                 # m/s away from it
+    sigma_n, _ = problem.bounce_sigmas(inc[1], ct.normal)
+    limit = ct.material.restitution * v_in + 3 * sigma_n + BOUNCE_GAIN_MARGIN_MS
+    if v_out <= limit:
+        return None
+    return (f"leaves its {ct.label} bounce (frame {ct.frame}) at {v_out:.1f} m/s off the surface having arrived at "
+            f"{v_in:.1f} m/s: a bounce cannot gain speed (a racket hit there?)")
 
 
 #: a flight whose residuals, median-filtered over 5 observed frames, run this many σ to one side fits the
@@ -272,9 +303,13 @@ def _bounce_label(court: Court) -> str:
 
 def _kink_frames(obs: Observations, first: int, last: int, residual_frames: np.ndarray,
                  residuals: np.ndarray) -> list[int]:
-    """Where a missed contact most likely is: the sharpest turn of the 2D track and the worst-fitted frame,
-    at least 2 frames from the flight's ends."""
+    """Where a missed contact most likely is: the best break of the 2D track into two smooth pieces
+    (:func:`break_frame`), its sharpest turn and the worst-fitted frame, at least 2 frames from the flight's
+    ends."""
     out = []
+    b = break_frame(obs.uv, first, last)
+    if b is not None:
+        out.append(b)
     f = np.arange(first + 2, last - 1)
     if len(f):
         acc = obs.uv[f + 1] - 2 * obs.uv[f] + obs.uv[f - 1]
@@ -285,6 +320,58 @@ def _kink_frames(obs: Observations, first: int, last: int, residual_frames: np.n
     if m.any():
         out.append(int(residual_frames[m][int(np.argmax(residuals[m]))]))
     return list(dict.fromkeys(out))
+
+
+def break_frame(uv: np.ndarray, first: int, last: int, half: int = 8, margin: int = 3) -> int | None:
+    """The frame in ``[first + margin, last - margin]`` where the 2D track ``uv`` (T, 2; NaN where missing)
+    most likely turns at a contact: where two quadratics in time, over the ``half`` frames before and after,
+    fit it best compared with one quadratic over both (the largest drop of the squared residual; each side
+    needs 4 points), or None. Local windows keep a quadratic adequate under perspective, and the fit is robust
+    to the pixel noise that decides the sharpest second difference: a far player's hit turns the track by a
+    few pixels per frame, as much as 2 px of noise does."""
+    frames = np.arange(len(uv))
+    ok = np.isfinite(uv).all(axis=1)
+
+    def sse(a: int, b: int) -> float:
+        m = ok[a:b + 1]
+        tt, yy = frames[a:b + 1][m], uv[a:b + 1][m]
+        if len(tt) < 4:
+            return np.nan
+        A = np.stack([np.ones(len(tt)), tt - tt[0], (tt - tt[0]) ** 2], axis=1)
+        coef, *_ = np.linalg.lstsq(A, yy, rcond=None)
+        return float(((A @ coef - yy) ** 2).sum())
+
+    best, where = 0.0, None
+    for b in range(first + margin, last - margin + 1):
+        a, c = max(first, b - half), min(last, b + half)
+        gain = sse(a, c) - sse(a, b) - sse(b, c)
+        if np.isfinite(gain) and gain > best:
+            best, where = gain, b
+    return where
+
+
+def turn_frames(uv: np.ndarray, first: int, last: int, half: int = 2, margin: int = 3) -> list[int]:
+    """Where the ball is highest and lowest in the picture inside ``[first + margin, last - margin]`` (the track
+    ``uv`` (T, 2) averaged over ``2 half + 1`` frames), when that is not at an end: a racket hit far from the
+    camera turns the ball from going away to coming back, which the picture shows as its highest point with
+    hardly a kink (the change is along the line of sight); a near hit as its lowest point."""
+    lo, hi = first + margin, last - margin
+    if hi - lo < 2:
+        return []
+    v = uv[first:last + 1, 1]
+    k = np.ones(2 * half + 1)
+    ok = np.isfinite(v)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        smooth = np.convolve(np.where(ok, v, 0.0), k, "same") / np.convolve(ok.astype(float), k, "same")
+    smooth[~ok] = np.nan
+    inner = smooth[lo - first:hi - first + 1]
+    if not np.isfinite(inner).any():
+        return []
+    out = []
+    for i in (int(np.nanargmin(inner)), int(np.nanargmax(inner))):
+        if 0 < i < len(inner) - 1:
+            out.append(lo + i)
+    return out
 
 
 def _gap_frames(obs: Observations, first: int, last: int, min_gap: int = 3) -> list[int]:
@@ -371,7 +458,7 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
             yield plan
     # 4. a missed racket hit: a volley or a hit the tracker lost (a serve in the gap after its toss), by the
     #    player on the side of the net where the fit has the ball first, then by the other
-    for frame in kinks[:1] + gaps[:1]:
+    for frame in dict.fromkeys(kinks[:1] + turn_frames(obs.uv, chk.first, chk.last) + gaps[:1]):
         side = _side_label(fit, frame)
         for lab in (side, "player_far" if side == "player_near" else "player_near"):
             plan = inserted(frame, lab, "a racket")

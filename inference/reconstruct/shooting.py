@@ -658,7 +658,7 @@ class Problem:
                      lambda: [(drag[:, None], np.full((len(drag), 1), 1.0 / cfg.drag_sigma))])
         return rows, {"flights": fl, "owners": own, "taus": taus}
 
-    def _incoming(self, theta: np.ndarray, fl: Flights, taus: np.ndarray, c: int):
+    def incoming(self, theta: np.ndarray, fl: Flights, taus: np.ndarray, c: int):
         """The flight arriving at contact c: (flight index, v_in (3,), ω_in (3,), dv_in/dinputs (N_IN, 3) or
         None when v_in is the lead-in's own velocity parameter)."""
         ch = self.chain
@@ -673,7 +673,7 @@ class Problem:
                 return s, theta[f.vel], w, None, 1.0
         return None
 
-    def _bounce_sigmas(self, v_in: np.ndarray, normal: np.ndarray) -> tuple[float, float]:
+    def bounce_sigmas(self, v_in: np.ndarray, normal: np.ndarray) -> tuple[float, float]:
         """σ (m/s) of the outgoing velocity around the impact model's, along the normal and along the surface,
         for an incoming velocity ``v_in`` (3,)."""
         cfg = self.cfg
@@ -690,7 +690,7 @@ class Problem:
             if ct.material is None or ct.normal is None:
                 continue
             out = [s for s, f in enumerate(ch.flights) if f.start == c and not f.lead_in]
-            inc = self._incoming(theta, fl, taus, c)
+            inc = self.incoming(theta, fl, taus, c)
             if not out or inc is None:
                 continue
             if inc[1] @ ct.normal > -0.3:      # not moving into the surface: nothing to model
@@ -711,7 +711,7 @@ class Problem:
         for q, (ct, so, (si, vin, win, dvin, decay)) in enumerate(todo):
             n = ct.normal
             vo, wo = VO[7 * q:7 * q + 7], WO[7 * q:7 * q + 7]
-            s_n, s_t = self._bounce_sigmas(vin, n)
+            s_n, s_t = self.bounce_sigmas(vin, n)
             # residual in (normal, tangential) components
             Pn = np.outer(n, n)
             scale = (Pn / s_n + (np.eye(3) - Pn) / s_t)                         # (3, 3) symmetric
@@ -938,13 +938,13 @@ class Problem:
             if ct.material is None or ct.normal is None:
                 continue
             out = [f for f in ch.flights if f.start == c and f.end is None and not f.lead_in]
-            inc = self._incoming(theta, fl, taus, c)
+            inc = self.incoming(theta, fl, taus, c)
             if not out or inc is None or inc[1] @ ct.normal > -0.3:
                 continue
             vo, _ = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
                            ct.material.friction, self.obs.court.ball.radius)
             dv = theta[out[0].vel] - vo[0]
-            s_n, s_t = self._bounce_sigmas(inc[1], ct.normal)
+            s_n, s_t = self.bounce_sigmas(inc[1], ct.normal)
             dn = float(dv @ ct.normal)
             if np.hypot(dn / s_n, np.linalg.norm(dv - dn * ct.normal) / s_t) < self.cfg.reseed_sigmas:
                 continue                   # the run-out is about what the impact model says: leave it
@@ -973,7 +973,7 @@ class Problem:
         fl, taus = fl if fl is not None else self.flights(theta, perturb=False), self.taus(theta)
         for c, out, _ in flagged:
             ct = self.chain.contacts[c]
-            inc = self._incoming(theta, fl, taus, c)
+            inc = self.incoming(theta, fl, taus, c)
             vo, wo = bounce(inc[1][None], inc[2][None], ct.normal[None], ct.material.restitution,
                             ct.material.friction, self.obs.court.ball.radius)
             theta[out.vel] = vo[0]
@@ -1227,7 +1227,6 @@ class FrameErrorModel:
     ray: np.ndarray         # (M, 3) unit line of sight
     flight_chi2: np.ndarray  # (flights,) mean squared normalised reprojection residual per 2D coordinate
     factor: np.ndarray       # (M,) covariance factor of the frame's flight (Uncertainty.flight_factor)
-
     def covariances(self) -> np.ndarray:
         """(M, 3, 3)."""
         sub = self.theta_cov[self.cols[:, :, None], self.cols[:, None, :]]                # (M, 11, 11)

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from inference.camera import Camera
 from inference.clipio import Clip
 from inference.court import load_court
 from inference.reconstruct import Observations
@@ -21,13 +20,18 @@ SIZE = (1280, 720)
 
 
 def _lob_rally():
-    """A simulated padel rally with three lobs, filmed from a broadcast position tilted so low that the lobs
-    leave the top of the picture for 93 frames; 2 px noise, the true events."""
+    """A simulated padel rally filmed from the broadcast preset (high behind the near glass, the whole court in
+    view): its highest lob (apex 9.5 m) leaves the top of the picture for 36 frames; 2 px noise, the true
+    events."""
     from training.synth.rally import simulate_rally
 
     court = load_court("padel")
     rally = simulate_rally(court, 25.0, np.random.default_rng(1))
-    cam = Camera.from_look_at((5.0, -8.0, 8.0), (5.0, 4.0, 0.0), SIZE, fov_deg=58)
+    from dataclasses import replace
+
+    from training.synth.cameras import CameraSpec
+
+    cam = replace(CameraSpec.preset("padel_broadcast"), width=SIZE[0], height=SIZE[1]).build(court)
     xyz = rally.ball.sample(rally.frame_times)
     uv = cam.project(xyz) + np.random.default_rng(1).normal(0.0, 2.0, (len(xyz), 2))
     outside = ~((uv >= 0) & (uv < SIZE)).all(axis=1)
@@ -40,27 +44,25 @@ def test_the_frames_above_the_picture_are_known_to_be_there():
     obs, xyz, outside = _lob_rally()
     beyond = obs.beyond_edges()
     above = np.flatnonzero(outside & (obs.camera.project(xyz)[:, 1] < 0))
-    assert len(above) > 60
+    assert len(above) > 25
     assert np.mean([beyond.get(int(f)) == 0 for f in above]) > 0.85  # edge 0: the top
     assert not any(e != 0 for e in beyond.values())                  # nothing leaves through another edge
 
 
 def test_a_lob_leaving_the_top_of_the_picture_is_reconstructed_above_it():
-    """Every flight of the rally but the first (the serve's drop, judged below the floor) is reconstructed;
-    the three lobs (apex 3.2–5.3 m) leave the picture for 93 frames, which the fit keeps above its top edge
-    (what the picture says of them): each lob's hidden frames within 0.55 m of the truth (0.18 / 0.46 / 0.12
-    m; without the edge 0.57 / 0.76 / 0.20 m)."""
+    """Every flight of the rally is reconstructed; the lob that leaves the picture (36 frames, 1.4 s) is kept
+    above its top edge (what the picture says of it), its hidden frames within 0.3 m of the truth (3 cm)."""
     obs, xyz, outside = _lob_rally()
     fit = fit_joint(obs)
-    failed = [s for s in fit.segments if not s.ok and s.segment.start > 10]
+    failed = [s for s in fit.segments if not s.ok]
     assert not failed, [(s.segment.start, s.segment.end, s.reason) for s in failed]
-    lobs = [s for s in fit.segments if s.ok and xyz[s.frames, 2].max() > 3.0 and outside[s.frames].any()]
-    assert len(lobs) == 3
+    lobs = [s for s in fit.segments if s.ok and xyz[s.frames, 2].max() > 3.0 and outside[s.frames].sum() > 25]
+    assert len(lobs) >= 1
     for s in lobs:
         hidden = outside[s.frames]
         assert np.mean(obs.camera.project(s.xyz[hidden])[:, 1] < 2 * 2.0) > 0.95  # above the top edge (2 σ)
         err = np.linalg.norm(s.xyz[hidden] - xyz[s.frames[hidden]], axis=1)
-        assert err.max() < 0.55, (s.segment, err.max())
+        assert err.max() < 0.3, (s.segment, err.max())
 
 
 @pytest.fixture(scope="module")
@@ -73,38 +75,44 @@ def padel():
 def test_a_missed_racket_hit_is_refitted_not_written_wrong(padel):
     """The far player's hit at frame 69 missing from the events: the flight from the bounce before it to the
     bounce after cannot be one flight. Its RMS alone passes (7.7 px < 8); the bend of its residuals fails it,
-    and the refit inserts a racket hit there: every frame within 0.3 m (the old fit wrote it 2.6 m off)."""
+    and the refit inserts a racket hit there. The far hit turns the ball along the line of sight — in the
+    picture its highest point with a 1.5 px kink, below the 2D noise — so the sharpest turn of the noisy track
+    is no guide: on 3 of 5 noise draws the refit put a skimming floor 'bounce' or a hit 8–14 frames off and
+    wrote the flight 1.7–2 m off. Now, on three draws, every frame within 0.6 m (the fit with the true event:
+    0.12–0.23 m)."""
     clip, obs = padel
-    k = obs.event_frames.tolist().index(69)
-    frames = np.delete(obs.event_frames, k)
-    labels = [lab for i, lab in enumerate(obs.event_labels) if i != k]
-    fit = fit_joint(Observations(obs.court, obs.camera, obs.fps, obs.uv, frames, labels, obs.players))
-    [across] = [s for s in fit.segments if s.segment.start < 69 < s.segment.end]
     gt = clip.read_ball_3d(gt=True)
-    if across.ok:
+    for seed in range(3):
+        obs, _, _ = prepare(clip, Setting(noise_px=2.0, players="gt", seed=seed))
+        k = obs.event_frames.tolist().index(69)
+        frames = np.delete(obs.event_frames, k)
+        labels = [lab for i, lab in enumerate(obs.event_labels) if i != k]
+        fit = fit_joint(Observations(obs.court, obs.camera, obs.fps, obs.uv, frames, labels, obs.players))
+        [across] = [s for s in fit.segments if s.segment.start < 69 < s.segment.end]
+        assert across.ok, (seed, across.reason)
         notes = [note for f, note in fit.extra.get("refits", []) if abs(f - 69) <= 3]
-        assert notes and "racket" in notes[0]
+        assert notes and "racket" in notes[0], (seed, fit.extra.get("refits"))
         err = np.linalg.norm(across.xyz - gt.xyz[np.searchsorted(gt.frame, across.frames)], axis=1)
-        assert np.max(err) < 0.3
-    else:
-        assert "bends" in across.reason or "RMS" in across.reason
+        assert np.max(err) < 0.6, (seed, np.max(err))
 
 
 def test_a_flight_the_fit_cannot_reach_is_failed_not_written_empty(padel):
-    """The track after the last bounce (frame 223) 150 px off the ball (a detector on something else): the
-    last hit is refitted as no contact, so the fit stops at the bounce and the flight from it to the hit
-    covers one frame. It is reported failed with its reason, never as a reconstructed zero-length flight."""
+    """The track after the last bounce (frame 232, the near player's hit at 235) 150 px off the ball (a
+    detector on something else), from two frames on: the flight from the bounce to the hit cannot be fitted
+    (the refit tries the hit as a bounce, or as no contact). It is reported failed with its reason, never as a
+    reconstructed flight of fewer than 2 frames."""
     _, obs = padel
-    uv = obs.uv.copy()
-    uv[224:] += [150.0, -75.0]
-    fit = fit_joint(Observations(obs.court, obs.camera, obs.fps, uv, obs.event_frames, obs.event_labels,
-                                 obs.players))
-    for s in fit.segments:
-        assert not s.ok or len(s.frames) >= 2, (s.segment, len(s.frames))
-    [last] = [s for s in fit.segments if s.segment.start_event == "ground" and s.segment.end_event == "player_far"
-              and s.segment.start >= 223]
-    assert not last.ok and "1 frame" in last.reason
-    assert fit.extra["plausibility"]["failed"] >= 1
+    for first_off in (233, 234):
+        uv = obs.uv.copy()
+        uv[first_off:] += [150.0, -75.0]
+        fit = fit_joint(Observations(obs.court, obs.camera, obs.fps, uv, obs.event_frames, obs.event_labels,
+                                     obs.players))
+        for s in fit.segments:
+            assert not s.ok or len(s.frames) >= 2, (first_off, s.segment, len(s.frames))
+        [last] = [s for s in fit.segments if s.segment.start_event == "ground" and s.segment.start >= 232
+                  and s.segment.end_event == "player_near"]
+        assert not last.ok and last.reason, (first_off, last.reason)
+        assert fit.extra["plausibility"]["failed"] >= 1
 
 
 def test_a_hit_where_no_player_stands_is_not_plausible():
