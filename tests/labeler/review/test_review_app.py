@@ -10,7 +10,7 @@ import msgspec
 import numpy as np
 import pytest
 import zstandard
-from review_fixtures import reconstructed_clip  # noqa: F401  (fixture)
+from review_fixtures import reconstructed_clip, sample_events, sample_shots  # noqa: F401  (fixture)
 
 from inference.clipio import FormatError
 from inference.court import load_court, points_in_polygon
@@ -131,7 +131,7 @@ def test_review_without_video_shows_placeholder(reconstructed_clip, tmp_path):
     (clip / "video.mp4").write_bytes(b"not a video")
     with pytest.warns(UserWarning, match="video cannot be opened"):
         d = ReviewData.load(clip)
-    assert not d.video_ok and len(d.analysis.shots) == 6
+    assert not d.video_ok and len(d.analysis.shots) == len(sample_shots())  # one shot per racket hit
 
 
 # ---------------------------------------------------------------------------------------------- export
@@ -155,12 +155,15 @@ def test_export_writes_a_playable_replay_and_the_shot_table(data, tmp_path):
     html = res.html.read_text()
     assert "window.__VISER_EMBED_DATA__=" in html and html.index("__VISER_EMBED_DATA__") < html.index("</head>")
     rows = list(csv.DictReader(io.StringIO(res.shots_csv.read_text())))
-    assert len(rows) == len(data.analysis.shots) == 6
-    assert [r["team"] for r in rows] == ["near", "far", "near", "far", "near", "far"]
-    assert all(r["call"] == "in" for r in rows[:5])
+    expected = sample_shots()  # one shot per racket hit of events.csv: (hit frame, team, has a floor bounce)
+    assert len(rows) == len(data.analysis.shots) == len(expected)
+    assert [(int(r["hit_frame"]), r["team"]) for r in rows] == [(f, team) for f, team, _ in expected]
+    # every shot with a floor bounce is called in (the far lob too, above the picture for 59 frames); the
+    # last, cut by the clip's end before its bounce, has no call
+    assert [r["call"] for r in rows] == ["in" if bounced else "" for *_, bounced in expected]
     # the page's side panel: the clip's video copied beside it, the shot table, the frame read-outs
     assert (tmp_path / "out" / "video.mp4").read_bytes() == data.clip.video_path.read_bytes()
-    assert html.count('<tr><td>') == 6 and 'id="rally3d-video" src="video.mp4"' in html
+    assert html.count('<tr><td>') == len(expected) and 'id="rally3d-video" src="video.mp4"' in html
     assert "rally3d-video-frame" in html and f'"hits": {[s.hit.frame for s in data.analysis.shots]}' in html
     labels = [m[1]["updates"]["text"] for m in rec["messages"] if m[1]["type"] == "SceneNodeUpdateMessage"
               and m[1]["name"] == "/replay/frame" and "text" in m[1]["updates"]]
@@ -184,7 +187,11 @@ def overlaps(boxes) -> list[tuple[int, int]]:
 def test_contact_labels_do_not_overlap_in_the_broadcast_view(data):
     project = data.camera.project
     labels = contact_labels(data.analysis, project)
-    assert len(labels) >= 10 and all("@" in lab.text for lab in labels)  # shot number and frame in each
+    # one label per event from the first racket hit on (every hit and every contact after it; the serve's
+    # drop before it has none), each with its shot number and frame
+    first_hit = min(f for f, _, _ in sample_shots())
+    assert len(labels) == sum(f >= first_hit for f, _ in sample_events())
+    assert all("@" in lab.text for lab in labels)
     plain = contact_labels(data.analysis)  # without spreading, the sample's labels do cover each other
     assert overlaps(boxes_of(plain, project))
     assert not overlaps(boxes_of(labels, project))
@@ -201,7 +208,7 @@ def test_cli_export(reconstructed_clip, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "centre service line" in out and "replay.viser" in out
     assert (tmp_path / "x" / "replay.viser").stat().st_size > 1000
-    assert (tmp_path / "x" / "shots.csv").read_text().count("\n") == 7
+    assert (tmp_path / "x" / "shots.csv").read_text().count("\n") == 1 + len(sample_shots())  # header + shots
     assert main(["review", str(tmp_path / "nothing")]) == 1
     assert "clip.yaml" in capsys.readouterr().err
 

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from review_fixtures import reconstructed_clip  # noqa: F401  (fixture)
+from review_fixtures import reconstructed_clip, sample_shots  # noqa: F401  (fixture)
 
 from inference.clipio import Clip
 from inference.court import load_court
@@ -90,6 +90,19 @@ def edit_ball_3d(clip: Path, edit) -> None:
         w.writerows(rows)
 
 
+def n_flights(clip: Path) -> int:
+    """The flights of the clip's segments.json (the sample's reconstruction)."""
+    return len(json.loads((clip / "segments.json").read_text())["segments"])
+
+
+def with_bounce(shots: list) -> list:
+    """The shots of the sample that have a floor bounce to call: all but the last, which the clip's end cuts
+    before its bounce (:func:`review_fixtures.sample_shots`)."""
+    bounced = [b for *_, b in sample_shots()]
+    assert len(shots) == len(bounced)
+    return [s for s, b in zip(shots, bounced) if b]
+
+
 def table_row(table: str, shot: int) -> str:
     """The printed table's row of ``shot`` (rows start with the right-aligned shot number)."""
     return next(line for line in table.splitlines() if line[:4].strip() == str(shot) and line[4:5] == " ")
@@ -99,10 +112,11 @@ def table_row(table: str, shot: int) -> str:
 def failed_clip(reconstructed_clip, tmp_path_factory) -> Path:
     """Flight 3 (the far return, frames 69–98) failed; its rows are left in ball_3d.csv."""
     clip = copy_clip(reconstructed_clip, tmp_path_factory.mktemp("failed") / "clip")
+    n = n_flights(clip)
 
     def edit(doc):
         fail_flight(doc, 3, f"passes through the net {SCRIPT}")
-        not_plausible(doc, ["1/13 flights failed", f"odd {SCRIPT}"], 0.76)
+        not_plausible(doc, [f"1/{n} flights failed", f"odd {SCRIPT}"], 0.76)
 
     edit_segments(clip, edit)
     return clip
@@ -167,7 +181,7 @@ def test_b_banner_first_in_the_printed_table_and_escaped_in_replay_html(failed_c
     assert main(["review", str(failed_clip), "--export", str(tmp_path / "out"), "--stride", "8"]) == 0
     out = capsys.readouterr().out
     first = out.splitlines()[0]
-    assert first.startswith("3D NOT plausible: 1/13 flights failed")
+    assert first.startswith(f"3D NOT plausible: 1/{n_flights(failed_clip)} flights failed")
     assert "calls and figures below come only from the flights that passed their checks" in first
     assert "3D covers 76% of the rally" in out.splitlines()[1]
     page = (tmp_path / "out" / "replay.html").read_text()
@@ -182,7 +196,8 @@ def test_b_banner_first_in_the_printed_table_and_escaped_in_replay_html(failed_c
 def test_b_not_judged_without_a_plausibility_check(reconstructed_clip, tmp_path):
     clip = copy_clip(reconstructed_clip, tmp_path / "clip")
     plausible = ReviewData.load(clip).analysis
-    assert shots_table(plausible).splitlines()[0].startswith("3D plausible: 13/13 flights reconstructed")
+    n = n_flights(clip)  # every flight of segments.json, the lob above the picture included, reconstructed
+    assert shots_table(plausible).splitlines()[0].startswith(f"3D plausible: {n}/{n} flights reconstructed")
     assert "NOT" not in shots_table(plausible)
     edit_segments(clip, lambda doc: doc.pop("plausibility"))
     line = shots_table(ReviewData.load(clip).analysis).splitlines()[0]
@@ -270,14 +285,16 @@ def test_c_clip_bounce_moved_next_to_a_line_is_too_close_to_call(reconstructed_c
     b = a.shots[0].first_bounce
     assert b.frame == 56 and b.line == "centre service line" and b.distance_cm == pytest.approx(1)
     assert b.sigma_cm == pytest.approx(2.0) and b.uncertain
-    others = [s.first_bounce for s in a.shots[1:5]]
+    others = [s.first_bounce for s in with_bounce(a.shots)[1:]]
+    assert 232 in [o.frame for o in others]  # the far lob's bounce, after 59 frames above the picture
     assert all(math.isfinite(o.sigma_cm) and not o.uncertain for o in others)
     table = shots_table(a)
     assert "within 2σ (±4 cm): too close to call" in table_row(table, 0)
     assert "too close" not in table_row(table, 1) and "at 2σ" in table_row(table, 1)
     rows = shot_rows(a)
     assert rows[0]["too_close_to_call"] == 1 and rows[0]["line_sigma_cm"] == pytest.approx(2.0)
-    assert rows[1]["too_close_to_call"] == 0 and rows[5]["too_close_to_call"] == ""
+    assert rows[1]["too_close_to_call"] == 0 and rows[-1]["too_close_to_call"] == ""  # the last: no bounce
+    assert a.shots[-1].first_bounce is None
     assert "too close to call" in shot_cells(a.shots[0])[-1]
     # without its covariance at the bounce frame, the nearest frame of its flight gives it
     edit_ball_3d(clip, lambda rows: [{**r, **({c: "" for c in r if c.startswith("cov_")} if r["frame"] == "56"
@@ -289,7 +306,7 @@ def test_c_sigma_unknown_without_covariance_columns(reconstructed_clip, tmp_path
     clip = copy_clip(reconstructed_clip, tmp_path / "clip")
     edit_ball_3d(clip, lambda rows: [{k: v for k, v in r.items() if not k.startswith("cov_")} for r in rows])
     a = analyse_clip(Clip(clip))
-    assert all(math.isnan(s.first_bounce.sigma_cm) for s in a.shots[:5])
+    assert all(math.isnan(s.first_bounce.sigma_cm) for s in with_bounce(a.shots))
     assert "σ unknown" in table_row(shots_table(a), 0) and "σ unknown" in shot_cells(a.shots[0])[-1]
     assert shot_rows(a)[0]["call_note"] == "σ unknown" and shot_rows(a)[0]["too_close_to_call"] == ""
 
@@ -302,6 +319,7 @@ def test_d_shots_csv_keeps_its_columns_and_adds_status_and_sigma(failed_clip, tm
     assert header == CSV_COLUMNS and header[: len(OLD_COLUMNS)] == OLD_COLUMNS
     assert {"status", "no_3d_reason", "line_sigma_cm", "too_close_to_call", "call_note"} <= set(header)
     rows = list(csv.DictReader(io.StringIO(text)))
-    assert [r["status"] for r in rows] == ["ok", "no 3D", "ok", "ok", "ok", "ok"]
+    # shot 1 (the far hit at 69) lies over the failed flight 69–98; every other shot of the sample is ok
+    assert [r["status"] for r in rows] == ["no 3D" if k == 1 else "ok" for k in range(len(sample_shots()))]
     assert float(rows[0]["line_sigma_cm"]) > 0 and rows[0]["too_close_to_call"] == "0"
     assert SCRIPT in rows[1]["no_3d_reason"]  # the CSV keeps the text as it is (no HTML here)
