@@ -39,13 +39,15 @@ HIT_SIDE_TOLERANCE_M = 1.0
 class HitLimits:
     """What players can do, for judging a fitted racket hit (court YAML ``plausibility``): where it can be
     struck (the players' area, :func:`inference.players.tracking.player_area`, widened by the reach), how
-    high (``hits.height``), where an overhead can be (``overhead_behind_m`` behind the baseline at most) and
+    high (``hits.height``) and how low (``min_hit_m``: a ball at the floor is bounced, not hit), where an
+    overhead can be (``overhead_behind_m`` behind the baseline at most) and
     how fast the ball leaves (``max_speed_kmh``: overheads — serves, smashes — and other shots).
 
     Attributes:
         area: (K, 4) rectangles x0, x1, y0, y1 (m) where a hit may be; max_height: m; overhead_m: a hit at
         least this high is an overhead; overhead_behind_m: how far behind the baseline an overhead may be;
-        max_overhead_kmh, max_other_kmh: launch speeds (None: no limit besides the fit's own).
+        max_overhead_kmh, max_other_kmh: launch speeds (None: no limit besides the fit's own); min_height: m,
+        the ball centre's lowest at a racket contact (0: no check).
     """
 
     area: np.ndarray
@@ -54,6 +56,7 @@ class HitLimits:
     overhead_behind_m: float | None = None
     max_overhead_kmh: float | None = None
     max_other_kmh: float | None = None
+    min_height: float = 0.0
 
     @classmethod
     def from_court(cls, court: Court) -> HitLimits:
@@ -67,7 +70,7 @@ class HitLimits:
         speed = d.get("max_speed_kmh") or {}
         num = lambda v: None if v is None else float(v)  # noqa: E731
         return cls(area, float(court.hits.height[1]), float(d.get("overhead_m", 2.2)), num(d.get("overhead_behind_m")),
-                   num(speed.get("overhead")), num(speed.get("other")))
+                   num(speed.get("overhead")), num(speed.get("other")), float(d.get("min_hit_m", 0.0)))
 
     def problems(self, court: Court, point: np.ndarray, label: str, speed_ms: float | None) -> list[str]:
         """Why a racket hit at ``point`` (3,) labelled ``label`` leaving at ``speed_ms`` cannot be ([]: it can)."""
@@ -80,6 +83,9 @@ class HitLimits:
             beside = max(-x, x - float(court.size[0]), 0.0)
             where = f"{behind:.1f} m behind the baseline" if behind >= beside else f"{beside:.1f} m beside the court"
             out.append(f"a racket hit {where}, where no player stands")
+        if z < self.min_height:
+            out.append(f"a racket hit {z:.2f} m high, at the floor (a half-volley meets the ball at "
+                       f"{self.min_height:g} m or more: a bounce?)")
         if z > self.max_height:
             out.append(f"a racket hit {z:.1f} m high, above any player's reach ({self.max_height:g} m)")
         overhead = z >= self.overhead_m

@@ -128,6 +128,18 @@ def test_a_hit_where_no_player_stands_is_not_plausible():
     assert any("near player's hit" in w for w in limits.problems(court, np.array([5.5, 20.0, 1.0]), "player_near", None))
 
 
+@pytest.mark.parametrize("sport", ["tennis", "padel"])
+def test_a_racket_hit_at_the_floor_is_not_plausible(sport):
+    """A real broadcast clip's first near hit was fitted 3 cm high (the ball lying on the floor) and passed: a
+    racket meets the ball's centre no lower than a half-volley does (the court YAML's ``min_hit_m``)."""
+    court = load_court(sport)
+    limits = HitLimits.from_court(court)
+    assert limits.min_height >= 0.05
+    why = limits.problems(court, np.array([5.0, 1.0, 0.03]), "player_near", None)
+    assert any("at the floor" in w for w in why), why
+    assert limits.problems(court, np.array([5.0, 1.0, 0.25]), "player_near", None) == []
+
+
 def test_the_tennis_sample_with_its_far_hitter_deep_behind_the_baseline_is_judged(tmp_path):
     """The far player of the tennis sample placed 9 m behind the baseline (a players stage that picked a
     spectator): the 3D cannot keep both the hitter and a plausible hit; no flight with an impossible hit is
