@@ -5,7 +5,11 @@
 Per sport, ``--cameras`` random scenes (seeds from ``--seed``) in the randomised look: venue, players and
 ball in play, lighting, sensor noise, lens blur, JPEG, and half of the cameras with mild radial distortion.
 Padel alternates the ``padel_broadcast`` and ``padel_installed`` presets, tennis ``tennis_broadcast`` and
-``tennis_high``. The fit sees the median of ``--frames`` frames spread over the rally, as on a clip.
+``tennis_high``; ``padel_tour`` is padel at a tour event as broadcast (``SynthConfig(venue="tour")``: bright
+rails and posts, the court's outline unpainted and the glass on bright base profiles, floor logos, a score
+box, an advertising board that may hide the near baseline), alternating the ``padel_tv`` and
+``padel_broadcast`` presets. The fit sees the median of ``--frames`` frames spread over the rally, as on a
+clip. Sport k of ``--sports`` takes the seeds from ``--seed`` + 1000 k.
 
 Figures per sport: the share of fits the gate accepts (success rate); of those, the camera-centre error (m),
 the focal error (%) and the reprojection RMS (px), against the ground truth, of those of the 12 floor
@@ -26,7 +30,9 @@ from training.synth.generate import SynthConfig, SynthScene
 
 from bench_calibration import FLOOR_12, GOALS, error_cells, goals_text  # noqa: E402  (bench/ is on the path)
 
-PRESETS = {"padel": ("padel_broadcast", "padel_installed"), "tennis": ("tennis_broadcast", "tennis_high")}
+PRESETS = {"padel": ("padel_broadcast", "padel_installed"), "tennis": ("tennis_broadcast", "tennis_high"),
+           "padel_tour": ("padel_tv", "padel_broadcast")}
+VENUE = {"padel_tour": ("padel", "tour")}  # bench row → (sport, SynthConfig.venue); others: the club look
 
 
 def run_sport(sport: str, n: int, seed: int, n_frames: int, size: tuple[int, int] | None,
@@ -34,7 +40,8 @@ def run_sport(sport: str, n: int, seed: int, n_frames: int, size: tuple[int, int
     rows = []
     for k in range(n):
         preset = PRESETS[sport][k % 2]
-        cfg = SynthConfig(sport=sport, camera=preset)
+        court_sport, venue = VENUE.get(sport, (sport, "club"))
+        cfg = SynthConfig(sport=court_sport, camera=preset, venue=venue)
         if size:
             cfg = replace(cfg, width=size[0], height=size[1])
         scene = SynthScene.build(seed + k, cfg)
@@ -78,7 +85,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=500)
     ap.add_argument("--frames", type=int, default=N_FRAMES, help=f"frames per fit (default {N_FRAMES})")
     ap.add_argument("--size", help="fix the resolution, e.g. 1920x1080 (default: drawn per scene)")
-    ap.add_argument("--sports", default="padel,tennis")
+    ap.add_argument("--sports", default="padel,tennis,padel_tour",
+                    help="bench rows: padel, tennis, padel_tour (default: all three)")
     ap.add_argument("-v", "--verbose", action="store_true", help="one line per scene")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.lower().split("x")) if args.size else None

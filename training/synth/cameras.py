@@ -6,6 +6,9 @@ Presets:
     ``padel_broadcast`` — a broadcast padel view: high (8 m) and well behind the near glass (8 m), the whole
     court in view (render it at 1080p with ``SynthConfig(width=1920, height=1080)`` or ``--size 1920x1080``).
     ``tennis_high`` — a higher, farther tennis view (14 m up, 18 m behind the baseline).
+    ``padel_tv`` — a tour event's main padel camera: 7.5 m high and 13.5 m behind the near glass, a longer
+    lens, the court in the upper part of the picture (an advertising board and a score box around it: render
+    it with ``SynthConfig(venue="tour")``).
 
 Example:
     >>> spec = CameraSpec.preset("padel_installed").randomised(np.random.default_rng(0))
@@ -58,6 +61,7 @@ class CameraSpec:
             "tennis_broadcast": CameraSpec(eye=(5.485, -14.0, 9.0), target=(5.485, 10.5, 0.0), margin=0.08),
             "padel_broadcast": CameraSpec(eye=(5.0, -8.0, 8.0), target=(5.0, 9.0, 0.0), margin=0.05),
             "tennis_high": CameraSpec(eye=(5.485, -18.0, 14.0), target=(5.485, 11.0, 0.0), margin=0.06),
+            "padel_tv": CameraSpec(eye=(5.0, -13.5, 7.5), target=(5.0, 8.0, 0.0), margin=0.06),
         }
         if name not in presets:
             raise KeyError(f"unknown camera preset {name!r}; presets: {sorted(presets)}")

@@ -35,6 +35,7 @@ from .render import Appearance, CourtRenderer, FrameInfo, ball_exposure
 from .types import Rally
 
 CODECS = ("h264", "mp4v", "frames")
+VENUES = ("club", "tour")
 DEFAULT_CAMERA = {"padel": "padel_installed", "tennis": "tennis_broadcast"}
 
 
@@ -57,6 +58,10 @@ class SynthConfig:
         around_point: the server's bounces before the serve and the ball after the point (rolling,
             caught, knocked to the side), as real clips hold them; they are not events, and
             ``gt/rally.yaml`` marks the point. Off by default (the default clips are unchanged).
+        venue: ``club`` (the default look) or ``tour`` (padel: a tour event as broadcast,
+            :meth:`Appearance.tour`: bright rails and posts, the court's outline unpainted, floor logos, a
+            score box, an advertising board that may hide the near baseline), drawn from its own stream: the
+            other draws are unchanged.
     """
 
     sport: str = "padel"
@@ -73,10 +78,13 @@ class SynthConfig:
     max_frames: int | None = None
     look_shift: bool = False
     around_point: bool = False
+    venue: str = "club"
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
             raise ValueError(f"codec must be one of {CODECS}, got {self.codec!r}")
+        if self.venue not in VENUES:
+            raise ValueError(f"venue must be one of {VENUES}, got {self.venue!r}")
 
 
 @dataclass
@@ -171,6 +179,8 @@ class SynthScene:
         look = Appearance.sample(r_look, config.sport) if config.randomise_look else Appearance.plain(config.sport)
         if config.look_shift:
             look = look.shifted(np.random.default_rng([seed, 7]))  # its own stream: the default draws are unchanged
+        if config.venue == "tour":
+            look = look.tour(np.random.default_rng([seed, 11]))
         rally_cfg = default_config(config.sport)
         if config.around_point:
             rally_cfg = replace(rally_cfg, around=REAL_AROUND)

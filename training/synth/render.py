@@ -122,7 +122,17 @@ class Appearance:
     normalised intensities (> 1 darkens), ``vignette`` is the darkening at the corners (0-1),
     ``noise_sigma`` the sensor noise (grey levels), ``jpeg_quality`` None for no JPEG round trip,
     ``shutter`` the exposure as a fraction of the frame period, ``light_dir`` the direction the light
-    travels (z < 0), ``reflection_strength`` the opacity of the ball's glass reflections (0 = none).
+    travels (z < 0), ``reflection_strength`` the opacity of the ball's glass reflections (0 = none),
+    ``glass_joints`` the opacity of the joints between glass panels (every 2 m).
+
+    A tour event as broadcast (:meth:`tour`; the defaults leave every other look as it was):
+    ``perimeter_paint`` False leaves the court's outline unpainted (the walls bound it); ``glass_base`` the
+    colour of the profile under every glass panel, a band ``glass_base_width`` m wide on the floor just
+    outside the court; ``posts`` frame posts every 2 m along the mesh panels; ``floor_logos`` text painted
+    on the floor, ``(text, x0, y0, x1, y1)`` in court metres, in ``logo`` at opacity ``logo_alpha``;
+    ``scoreboard`` a score box keyed into the picture, ``(x0, y0, x1, y1)`` normalised; ``near_board``
+    ``(y, height)`` m of an advertising board across the view between the camera and the near glass
+    (``board`` colour), which can hide the near baseline; ``tour_seed`` draws their text.
     """
 
     sport: str = "padel"
@@ -157,6 +167,19 @@ class Appearance:
     reflection_strength: float = 0.35
     lens_blur: float = 0.0
     texture_seed: int = 0
+    glass_joints: float = 0.8
+    # a tour event as broadcast (all off by default; :meth:`tour` turns them on)
+    perimeter_paint: bool = True
+    glass_base: Colour | None = None
+    glass_base_width: float = 0.15
+    posts: bool = False
+    floor_logos: tuple[tuple[str, float, float, float, float], ...] = ()
+    logo: Colour = (236, 236, 236)
+    logo_alpha: float = 0.0
+    scoreboard: tuple[float, float, float, float] | None = None
+    near_board: tuple[float, float] | None = None
+    board: Colour = (22, 26, 44)
+    tour_seed: int = 0
 
     @classmethod
     def plain(cls, sport: str = "padel") -> Appearance:
@@ -209,6 +232,37 @@ class Appearance:
             lens_blur=float(rng.uniform(0.0, 0.8)),
             texture_seed=int(rng.integers(2**31)),
         )
+
+    def tour(self, rng: np.random.Generator) -> Appearance:
+        """This look at a tour event as broadcast (padel): bright top rails, frames and posts with a dark
+        mesh, frameless glass (faint joints) standing on bright base profiles and the court's outline
+        unpainted, logos painted on the floor, a score box in a corner of the picture, an advertising board
+        across the bottom of the view that may hide the near baseline. Only the fields above change (the
+        default draws are untouched). Measured on a real tour broadcast frame (issue 45): its side glass
+        stands on light profiles about 17 cm wide, outside the court (the service lines' paint ends at
+        their inner edge); its mesh is dark with light posts every 2 m."""
+        frame = _jitter(rng, ((214, 204, 170), (228, 228, 222), (196, 198, 204))[rng.integers(3)], 12)
+        logos = []
+        words = ("MAJOR", "OPEN", "MASTER", "PADEL", "TOUR", "FINALS", "CUP", "SERIES")
+        slots = [(7.6, 9.4), (10.6, 12.4), (0.9, 2.5), (17.5, 19.1)]
+        for k in rng.permutation(len(slots))[: int(rng.integers(1, 4))]:
+            y0, y1 = slots[k]
+            x0 = float(rng.uniform(0.8, 2.5))
+            n = int(rng.integers(1, 3))
+            text = " ".join(words[i] for i in rng.integers(len(words), size=n))
+            logos.append((text, x0, y0, float(10.0 - x0 + rng.uniform(-0.5, 0.5)), y1))
+        corner = rng.integers(2)
+        x0, y0 = float(rng.uniform(0.02, 0.06)), float(rng.uniform(0.03, 0.08))
+        bw, bh = float(rng.uniform(0.14, 0.24)), float(rng.uniform(0.07, 0.12))
+        box = (x0, y0, x0 + bw, y0 + bh) if corner == 0 else (1 - x0 - bw, y0, 1 - x0, y0 + bh)
+        return replace(
+            self, frame=frame, mesh=_jitter(rng, (28, 28, 32), 8), mesh_alpha=float(rng.uniform(0.75, 0.95)),
+            glass_joints=float(rng.uniform(0.0, 0.25)), perimeter_paint=False,
+            glass_base=_jitter(rng, frame, 10),
+            glass_base_width=float(rng.uniform(0.08, 0.2)), posts=True, floor_logos=tuple(logos),
+            logo=_jitter(rng, (236, 236, 236), 12), logo_alpha=float(rng.uniform(0.3, 0.75)),
+            scoreboard=box, near_board=(float(rng.uniform(-3.0, -1.2)), float(rng.uniform(0.8, 1.6))),
+            board=_hsv(rng, (0, 1), (0.2, 0.8), (0.08, 0.3)), tour_seed=int(rng.integers(2**31)))
 
     def shifted(self, rng: np.random.Generator) -> Appearance:
         """This look moved to another distribution than :meth:`sample` draws from (a stand-in for footage
@@ -420,6 +474,52 @@ def _sample_tile(tile: np.ndarray, u: np.ndarray, v: np.ndarray, texel_m: float)
     return cv2.remap(tile, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
 
 
+def _text_texture(text: str, width: int, height: int) -> np.ndarray:
+    """(height, width) float32 coverage in [0, 1] of ``text`` in bold capitals filling the box."""
+    width, height = max(width, 8), max(height, 8)
+    font = cv2.FONT_HERSHEY_DUPLEX
+    (tw, th), base = cv2.getTextSize(text, font, 1.0, 2)
+    scale = min(0.92 * width / tw, 0.8 * height / (th + base))
+    thick = max(1, int(round(2.2 * scale)))
+    (tw, th), base = cv2.getTextSize(text, font, scale, thick)
+    img = np.zeros((height, width), np.uint8)
+    cv2.putText(img, text, ((width - tw) // 2, (height + th) // 2), font, scale, 255, thick, cv2.LINE_AA)
+    return cv2.GaussianBlur(img.astype(np.float32) / 255.0, (0, 0), 0.7)
+
+
+def _score_box(app: Appearance, size: tuple[int, int]) -> tuple[int, int, np.ndarray, np.ndarray] | None:
+    """The broadcast's score box (``scoreboard``): its top-left pixel, premultiplied colour (h, w, 3) and
+    alpha (h, w): a dark panel with a light header, two rows of names and games, and rules between them."""
+    if app.scoreboard is None:
+        return None
+    w, h = size
+    x0, y0 = int(app.scoreboard[0] * w), int(app.scoreboard[1] * h)
+    x1, y1 = int(app.scoreboard[2] * w), int(app.scoreboard[3] * h)
+    bw, bh = max(x1 - x0, 20), max(y1 - y0, 12)
+    rng = np.random.default_rng([app.tour_seed, 3])
+    colour = np.zeros((bh, bw, 3), np.float32)
+    colour[:] = (18, 20, 30)
+    head = max(2, bh // 5)
+    colour[:head] = (235, 235, 235)
+    for k in range(2):
+        top = head + k * (bh - head) // 2
+        if k:
+            colour[top:top + max(1, bh // 40)] = (200, 200, 200)
+        row = np.zeros((bh, bw), np.uint8)
+        name = "".join(chr(65 + int(c)) for c in rng.integers(26, size=int(rng.integers(5, 9))))
+        name += " / " + "".join(chr(65 + int(c)) for c in rng.integers(26, size=int(rng.integers(5, 9))))
+        sub = _text_texture(name, int(0.75 * bw), (bh - head) // 2)
+        row[top:top + sub.shape[0], 4:4 + sub.shape[1]] = (255 * sub[: bh - top, : bw - 4]).astype(np.uint8)
+        score = _text_texture(str(int(rng.integers(7))), int(0.12 * bw), (bh - head) // 2)
+        sw = score.shape[1]
+        row[top:top + score.shape[0], bw - sw - 3:bw - 3] = (255 * score[: bh - top]).astype(np.uint8)
+        a = row.astype(np.float32)[..., None] / 255.0
+        colour = colour * (1 - a) + 245.0 * a
+    colour[:, :2] = colour[:, -2:] = (235, 235, 235)
+    alpha = np.full((bh, bw), 0.92, np.float32)
+    return x0, y0, colour * alpha[..., None], alpha
+
+
 # ======================================================================================================
 # Grading
 # ======================================================================================================
@@ -622,10 +722,67 @@ class _SceneBuilder:
         shade = 1.0 + app.floor_texture * tex + app.stripes * stripes
         colour = base * shade[..., None]
         cov = self._paint_coverage()
-        return colour * (1 - cov[..., None]) + np.asarray(app.line, np.float32) * cov[..., None]
+        colour = colour * (1 - cov[..., None]) + np.asarray(app.line, np.float32) * cov[..., None]
+        for tint, c in ((app.glass_base, self._glass_base_coverage()), (app.logo, self._logo_coverage())):
+            if c is not None:
+                colour = colour * (1 - c[..., None]) + np.asarray(tint, np.float32) * c[..., None]
+        return colour
+
+    def _glass_base_coverage(self) -> np.ndarray | None:
+        """(H, W) coverage of the profiles the glass panels stand on: a band ``glass_base_width`` m wide on
+        the floor along the bottom edge of every glass panel, on its outer side (the court's outline stays
+        where it is), or None without them."""
+        if self.app.glass_base is None:
+            return None
+        sx, sy = self.court.size
+        width = self.app.glass_base_width
+        X, Y = self.floor_x, self.floor_y
+        fw = np.nan_to_num(_fwidth(X) + _fwidth(Y), nan=1.0)
+        cov = np.zeros((self.h, self.w), np.float32)
+        for plane in self.court.planes:
+            if plane.material != "glass":
+                continue
+            pts = plane.corners_3d()
+            for a, b in zip(pts, np.roll(pts, -1, axis=0)):
+                if abs(a[2]) > 1e-6 or abs(b[2]) > 1e-6 or np.linalg.norm(b[:2] - a[:2]) < 1e-6:
+                    continue
+                ab = (b - a)[:2]
+                L = float(np.linalg.norm(ab))
+                u = ab / L
+                n = np.array([-u[1], u[0]])
+                if n @ (np.array([sx / 2, sy / 2]) - a[:2]) > 0:
+                    n = -n  # outwards
+                rel_x, rel_y = X - a[0], Y - a[1]
+                along = rel_x * u[0] + rel_y * u[1]
+                across = rel_x * n[0] + rel_y * n[1]
+                inside = np.clip(np.minimum(along, L - along) / np.maximum(fw, 1e-6) + 0.5, 0, 1)
+                c = np.nan_to_num(_band_coverage(across - width / 2, width / 2, fw) * inside)
+                cov = np.maximum(cov, c)
+        return cov
+
+    def _logo_coverage(self, px_per_m: float = 40.0) -> np.ndarray | None:
+        """(H, W) opacity of the text painted on the floor (``floor_logos``), or None without any."""
+        app = self.app
+        if not app.floor_logos or app.logo_alpha <= 0:
+            return None
+        X, Y = self.floor_x, self.floor_y
+        cov = np.zeros((self.h, self.w), np.float32)
+        for text, x0, y0, x1, y1 in app.floor_logos:
+            tex = _text_texture(text, int(round((x1 - x0) * px_per_m)), int(round((y1 - y0) * px_per_m)))
+            mx = np.nan_to_num((X - x0) * px_per_m - 0.5, nan=-10).astype(np.float32)
+            # the text reads from the near side: its top row at the far edge
+            my = np.nan_to_num((y1 - Y) * px_per_m - 0.5, nan=-10).astype(np.float32)
+            cov = np.maximum(cov, cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                                            borderValue=0))
+        return cov * np.float32(app.logo_alpha)
 
     def _floor_segments(self) -> list[np.ndarray]:
-        return [s for s in self.court.lines.get("paint", np.zeros((0, 2, 3))) if _on_floor(s)]
+        segs = [s for s in self.court.lines.get("paint", np.zeros((0, 2, 3))) if _on_floor(s)]
+        if not self.app.perimeter_paint:  # the walls bound the court: its outline is not painted
+            sx, sy = self.court.size
+            edges = ((0, 0.0), (0, sx), (1, 0.0), (1, sy))
+            segs = [s for s in segs if not any(np.allclose(s[:, k], v) for k, v in edges)]
+        return segs
 
     def _paint_coverage(self) -> np.ndarray:
         """(H, W) coverage of the painted floor lines, box-filtered with the floor's pixel footprint."""
@@ -656,8 +813,24 @@ class _SceneBuilder:
     def overlays(self) -> list[_Overlay]:
         """All see-through panels (glass, mesh, net) and frame tubes, far to near."""
         panels = [self._panel(p) for p in self.court.planes if p.material in ("glass", "mesh", "net")]
+        board = self.near_board()
+        if board is not None:
+            panels.append(self._panel(board))
         out = [o for o in panels + self._tubes() if o is not None]
         return sorted(out, key=lambda o: -o.distance)
+
+    def near_board(self) -> Plane | None:
+        """The advertising board across the view (``near_board``) as an opaque panel, when the camera stands
+        behind it (at least 1 m)."""
+        if self.app.near_board is None:
+            return None
+        y, height = self.app.near_board
+        if self.C[1] > y - 1.0:
+            return None
+        sx = self.court.size[0]
+        polygon = np.array([[0, 0], [0, sx + 16], [height, sx + 16], [height, 0]])
+        return Plane("near_board", "board", "board", np.array([-8.0, y, 0.0]), np.array([0.0, 0.0, 1.0]),
+                     np.array([1.0, 0.0, 0.0]), polygon)
 
     def _panel(self, plane: Plane) -> _Overlay | None:
         """Ray-cast one glass, mesh or net plane inside its polygon."""
@@ -681,7 +854,8 @@ class _SceneBuilder:
         z = P[..., 2]
         hits = _PanelHits(plane, np.abs(dn), h, z, np.nan_to_num(_fwidth(h), nan=1.0),
                           np.nan_to_num(_fwidth(z), nan=1.0), uv.reshape(*hit.shape, 2))
-        colour, alpha = {"glass": self._glass, "mesh": self._mesh, "net": self._net}[plane.material](hits)
+        colour, alpha = {"glass": self._glass, "mesh": self._mesh, "net": self._net,
+                         "board": self._board}[plane.material](hits)
         centroid = plane.corners_3d().mean(0)
         return _crop(x0, y0, colour, np.where(inside, alpha, 0.0), float(np.linalg.norm(centroid - self.C)),
                      plane=plane)
@@ -693,9 +867,31 @@ class _SceneBuilder:
         alpha = app.glass_alpha + (0.5 - app.glass_alpha) * fres
         sky = np.asarray(app.sky, np.float32) * 1.3
         colour = np.asarray(app.glass_tint, np.float32) * (1 - fres[..., None]) + sky * fres[..., None]
-        joints = 0.8 * _periodic_coverage(hits.h, 2.0, 0.008, hits.fw_h)
+        joints = app.glass_joints * _periodic_coverage(hits.h, 2.0, 0.008, hits.fw_h)
         joint_colour = np.broadcast_to(np.asarray(app.frame, np.float32) * 0.8, colour.shape)
         return _over_straight(colour, alpha, joint_colour, joints)
+
+    def _board(self, hits: _PanelHits):
+        """An opaque advertising board: its colour with light lettering every few metres."""
+        px_per_m = 30.0
+        height = float(hits.plane.polygon[:, 0].max())
+        width = float(hits.plane.polygon[:, 1].max())
+        rng = np.random.default_rng(self.app.tour_seed)
+        tex = np.zeros((int(height * px_per_m), int(width * px_per_m)), np.float32)
+        x = float(rng.uniform(0, 2))
+        while x < width - 2:
+            w = float(rng.uniform(1.5, 3.5))
+            word = "".join(chr(65 + int(c)) for c in rng.integers(26, size=int(rng.integers(4, 9))))
+            sub = _text_texture(word, int(w * px_per_m), int(0.45 * height * px_per_m))
+            r0, c0 = int(0.3 * height * px_per_m), int(x * px_per_m)
+            tex[r0:r0 + sub.shape[0], c0:c0 + sub.shape[1]] = sub[: tex.shape[0] - r0, : tex.shape[1] - c0]
+            x += w + float(rng.uniform(0.8, 2.5))
+        mx = np.nan_to_num(hits.h * px_per_m - 0.5).astype(np.float32)
+        my = np.nan_to_num((height - hits.z) * px_per_m - 0.5).astype(np.float32)
+        text = cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        light = np.asarray((225, 225, 225), np.float32)
+        colour = np.asarray(self.app.board, np.float32) * (1 - text[..., None]) + light * text[..., None]
+        return colour, np.ones(text.shape, np.float32)
 
     def _mesh(self, hits: _PanelHits):
         """Welded wire mesh, 5 cm squares of 4 mm wire."""
@@ -747,6 +943,26 @@ class _SceneBuilder:
                 else:
                     colour, r = (app.line if layer == "paint" else app.frame), radius
                 out.append(self._tube(seg[0], seg[1], r, colour))
+        for a, b in self._posts():
+            out.append(self._tube(a, b, self.TUBES["mesh"], app.frame))
+        return out
+
+    def _posts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Frame posts every 2 m along the mesh panels (``posts``): the mesh above the back glass and the side
+        mesh between the glass ends."""
+        if not self.app.posts:
+            return []
+        out = []
+        for plane in self.court.planes:
+            if plane.material != "mesh":
+                continue
+            pts = plane.corners_3d()
+            lo, hi = pts.min(0), pts.max(0)
+            k = 0 if hi[0] - lo[0] > hi[1] - lo[1] else 1  # the horizontal axis along the panel
+            for s in np.arange(np.ceil(lo[k] / 2.0) * 2.0, hi[k] + 1e-6, 2.0):
+                a, b = lo.copy(), hi.copy()
+                a[k] = b[k] = s
+                out.append((a, b))
         return out
 
     def _tube(self, a: np.ndarray, b: np.ndarray, radius: float, colour: Colour) -> _Overlay | None:
@@ -1018,6 +1234,7 @@ class CourtRenderer:
         self.looks = [self._tones(look) for look in appearance.players]
         self.ball_tone = self.grade.tone(appearance.ball)
         self._noise = self._noise_tiles(appearance.noise_sigma)
+        self._score = _score_box(appearance, camera.image_size)
         self._material_bias = np.array([MATERIAL_BIAS[m] for m in CAPSULE_MATERIALS])
 
     # --- setup --------------------------------------------------------------------------------------
@@ -1080,6 +1297,12 @@ class CourtRenderer:
         self._paint(img, items)
         tick("paint")
         self._add_noise(img, frame_idx)
+        if self._score is not None:  # keyed into the picture after the camera: no noise, then compressed
+            x0, y0, colour, alpha = self._score
+            h, w = alpha.shape
+            roi = img[y0:y0 + h, x0:x0 + w].astype(np.float32)
+            img[y0:y0 + h, x0:x0 + w] = np.clip(roi * (1 - alpha[..., None]) + colour + 0.5, 0,
+                                                 255).astype(np.uint8)
         tick("noise")
         img = self._jpeg(img)
         tick("jpeg")

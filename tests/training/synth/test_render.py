@@ -249,3 +249,56 @@ def test_exposure_helpers():
     s = ball_exposure(path, 3, FPS, 0.5, n=5)
     np.testing.assert_allclose(s[:, 0], 10 * t)
     assert ball_exposure(path, 60, FPS, 0.5) is None
+
+
+@pytest.fixture(scope="module")
+def tv_camera():
+    # a tour event's main camera: high, far behind the near glass, a longer lens
+    return Camera.from_look_at([5.0, -13.5, 7.5], [5.0, 8.0, 0.0], SIZE, fov_deg=52)
+
+
+def test_tour_look_changes_only_its_own_fields():
+    base = Appearance.sample(np.random.default_rng(5))
+    assert base.perimeter_paint and base.glass_base is None and not base.posts and not base.floor_logos
+    assert base.scoreboard is None and base.near_board is None
+    tour = base.tour(np.random.default_rng(1))
+    changed = {f for f in vars(base) if getattr(tour, f) != getattr(base, f)}
+    assert changed <= {"frame", "mesh", "mesh_alpha", "glass_joints", "perimeter_paint", "glass_base",
+                       "glass_base_width", "posts", "floor_logos", "logo", "logo_alpha", "scoreboard",
+                       "near_board", "board", "tour_seed"}
+    assert not tour.perimeter_paint and tour.glass_base is not None and tour.posts and tour.floor_logos
+    assert tour.scoreboard is not None and tour.near_board is not None
+
+
+def test_tour_outline_is_the_glass_base_not_paint(court, tv_camera, plain):
+    """The court's outline is not painted; the glass stands on a bright base profile just outside the court,
+    only where there is glass (4 m from each back wall along the sides), and posts stand along the mesh."""
+    red = (250, 30, 30)
+    club = CourtRenderer(court, tv_camera, plain)
+    tour = CourtRenderer(court, tv_camera, replace(plain, perimeter_paint=False, glass_base=red,
+                                                   glass_base_width=0.2, posts=True))
+    a, b = club.background(), tour.background()
+    px = lambda p: tv_camera.project(np.array([p], float))[0]  # noqa: E731
+    side_mid = px([0.0, 7.0, 0.0])  # the left side line along the mesh: painted in the club look only
+    assert pixel(a, side_mid).sum() > pixel(b, side_mid).sum() + 150
+    service = px([2.5, 3.05, 0.0])  # painted lines inside the court stay
+    assert np.abs(pixel(a, service) - pixel(b, service)).max() <= 3
+    redness = lambda p: int(pixel(b, px(p))[0]) - int(pixel(b, px(p))[1])  # noqa: E731  (through the glass)
+    assert redness([-0.1, 1.0, 0.0]) > 80 and redness([10.1, 19.0, 0.0]) > 80  # under the side glass
+    assert redness([-0.1, 7.0, 0.0]) < 20  # beside the mesh: no glass, no base
+    assert len(tour.overlays) > len(club.overlays)  # the posts
+
+
+def test_tour_board_hides_the_near_baseline_and_the_score_box_stays_put(court, tv_camera, plain):
+    look = replace(plain, near_board=(-1.5, 1.3), scoreboard=(0.03, 0.05, 0.23, 0.15), tour_seed=4)
+    r = CourtRenderer(court, tv_camera, look)
+    img0, info = r.render(0, still([5.0, 0.3, 0.1]), [])
+    img1, _ = r.render(5, None, [standing_player(4, 3)])
+    assert info.ball.visibility == 3  # behind the board
+    x, y = np.round(tv_camera.project(np.array([[5.0, 0.0, 0.0]]))[0]).astype(int)  # the near baseline
+    assert colour_mask(img0, look.board, tol=30)[y, x]
+    rows = slice(int(0.05 * SIZE[1]), int(0.15 * SIZE[1]))
+    cols = slice(int(0.03 * SIZE[0]), int(0.23 * SIZE[0]))
+    box = img0[rows, cols]
+    assert box.tobytes() == img1[rows, cols].tobytes()
+    assert box.mean() < 120  # a dark panel with light text
