@@ -344,7 +344,7 @@ def padel_track(real: Path, table: Table, args) -> dict:
     folder = real / "padel_tracks_wpt2022_dev"
     rows = read_wpt(folder / "wpt2022_master_final_women_frames_0-9999.csv")
     torch.set_num_threads(1)
-    weights = choose_weights(None, "padel", None)
+    weights = Path(args.padel_weights) if args.padel_weights else choose_weights(None, "padel", None)
     det = EventDetector.from_checkpoint(weights, sport="padel")
     part = "padel track (WPT2022, hand-annotated ball)"
     out = {"rows": len(rows), "weights": weights.name}
@@ -637,6 +637,8 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu", help="tennis clips: detector device")
     ap.add_argument("--tennis-weights", default=None,
                     help="tennis points: score this event model file instead of the shipped one `rally3d events` picks")
+    ap.add_argument("--padel-weights", default=None,
+                    help="padel track: score this event model file instead of the shipped one `rally3d events` picks")
     ap.add_argument("--padel-fps", type=float, default=25.0,
                     help="frame rate of the WPT rows (default 25: measured from the ball's fall, see docs)")
     ap.add_argument("--padel-lead", type=float, default=0.4, help="seconds of track before a serve window")

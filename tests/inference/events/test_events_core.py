@@ -102,9 +102,15 @@ def test_perfect_probabilities_decode_to_the_true_events(padel_clips):
         probs = window_probs_to_frames(np.eye(cs.n)[window_labels(lc.y, 12, 6)], len(lc.y), 12, 6)
         f, c = decode(probs, 50.0, cs, DecodeParams(thresholds=0.5, min_gap=1))
         truth = np.flatnonzero(lc.y)
-        counts = EventCounts(cs.classes)
-        counts.add(truth, lc.y[truth], f, c, tol=2)
-        assert counts.scores()["f1"] >= 0.95, (f.tolist(), truth.tolist())
+        # one label per window (12 frames, stride 6): two contacts closer than the stride (a corner's floor and
+        # glass 4 frames apart) share a window, and only one of them can come back
+        crowded = np.diff(truth) < 6
+        lone = truth[~(np.r_[crowded, False] | np.r_[False, crowded])]
+        every, alone = EventCounts(cs.classes), EventCounts(cs.classes)
+        every.add(truth, lc.y[truth], f, c, tol=2)
+        alone.add(lone, lc.y[lone], f, c, tol=2)
+        assert every.scores()["prec"] >= 0.95 and alone.scores()["recall"] >= 0.95, (f.tolist(), truth.tolist())
+        assert len(f) >= len(truth) - crowded.sum(), (f.tolist(), truth.tolist())
 
 
 def _peaks(T, spec, C=6, width=2):
