@@ -271,9 +271,16 @@ def hitter_position(obs: Observations, frame: int, label: str) -> np.ndarray | N
     return None if row is None else obs.players.court_xy[row]
 
 
+#: a player whose court position (at 1 m height) lies farther than the court's reach + this (m) from the ball's
+#: line of sight at a hit is not its hitter (the players stage found the partner, not the hitter: its pull
+#: had sent a real-looking lob 97 px off its track); the margin holds the position's and the hit frame's error
+HITTER_RAY_MARGIN_M = 1.5
+
+
 def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
     """players.csv row of the hitter of a racket hit at ``frame`` (see :func:`hitter_position`): players of
-    the named team, or, where players.csv has no team, on that side of the net."""
+    the named team, or, where players.csv has no team, on that side of the net; None when the nearest of them
+    stands farther from the ball's line of sight than the reach allows (:data:`HITTER_RAY_MARGIN_M`)."""
     if obs.players is None or label not in PLAYER_EVENTS:
         return None
     team = label.split("_")[1]
@@ -284,14 +291,17 @@ def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
     if not len(rows):
         return None
     uv, _ = nearest_observed(obs.uv, frame)
-    if uv is None or len(rows) == 1:
+    if uv is None:
         return int(rows[0])
     o, d = obs.camera.rays(uv[None])
     # distance from each candidate (at 1 m height) to the line of sight
     X = np.column_stack([p.court_xy[rows], np.ones(len(rows))])
     v = X - o
     dist = np.linalg.norm(v - (v @ d[0])[:, None] * d, axis=1)
-    return int(rows[int(np.argmin(dist))])
+    k = int(np.argmin(dist))
+    if dist[k] > float(obs.court.hits.reach) + HITTER_RAY_MARGIN_M:
+        return None
+    return int(rows[k])
 
 
 def keypoint_heights(obs: Observations, row: int, joints: tuple[int, ...]) -> np.ndarray:
