@@ -102,7 +102,11 @@ class PlayerTracks(ArraysEqualMixin):
 
     def of_player(self, player_id: int) -> PlayerTracks:
         """The rows of one player."""
-        m = self.player_id == player_id
+        return self.rows(self.player_id == player_id)
+
+    def rows(self, mask: np.ndarray) -> PlayerTracks:
+        """The rows where ``mask`` ((N,) bool) is True."""
+        m = np.asarray(mask, bool)
         return PlayerTracks(self.frame[m], self.player_id[m], self.team[m], self.score[m], self.bbox[m],
                             self.keypoints[m], self.court_xy[m], self.joints_3d[m])
 
