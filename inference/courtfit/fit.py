@@ -1,8 +1,10 @@
 """Automatic court fit: line evidence → line correspondences → camera refined on line distances → gate.
 
-1. :mod:`.lines`: the median of a few frames, its line pixels and straight lines;
+1. :mod:`.lines`: the median of a few frames, its line pixels and straight lines (:func:`.search.find_lines`:
+   each direction gets its own lines when dense transverse structure fills the list);
 2. :mod:`.search`: ordered correspondences between image lines and the court's painted lines, each a floor
-   homography, scored on the line pixels;
+   homography of a camera that looks down on the floor (not an edge-on view of upright structure), scored
+   on the line pixels;
 3. the best few: a camera from the homography's crossing points by the coplanar calibration
    (:func:`inference.calibration.calibrate`: Zhang's constraints, then f, R, t), refined on the distances of
    line pixels to the projected court lines (robust least squares; radial distortion k1, then k1 and k2,
@@ -11,7 +13,8 @@
    (coverage), the pixels sit close to the lines (line RMS), lines of both directions are supported, the
    runner-up explains clearly less (margin; a rival that lays a painted line on the near wall's top rail is
    the rail's echo, not a rival), the line pixels on the fitted court's floor are mostly on its modelled
-   lines (:func:`unexplained_share`) and the camera is plausible. A painted line running along that rail in
+   lines (:func:`unexplained_share`; not counting what a fence's mesh covers) and the camera is plausible
+   (above the floor on the near side, seeing it at ≥ 5°). A near painted line running along that rail in
    the image (a camera right behind the glass, where the rail hides or doubles the near service line) has
    the fit refined with the rails as lines of their own; it then needs a larger margin (rivals the gate
    would refuse on their own count only when the rails are not found along most of their length) and that
@@ -41,9 +44,10 @@ from inference.camera import Camera
 from inference.court import Court
 from inference.masks import apply_mask, clip_mask
 
-from .lines import LineEvidence, background, hough_lines, line_mask, working_scale
+from .lines import LineEvidence, background, line_mask, working_scale
 from .model import CourtLines, court_lines
-from .search import HIT_PX, best_hypotheses, hypotheses, split_lines
+from .search import (HIT_PX, MIN_ELEVATION_DEG, best_hypotheses, elevation_deg, find_lines, hypotheses,
+                     split_lines)
 
 N_FRAMES = 9
 MIN_COVERAGE = 0.6
@@ -345,10 +349,14 @@ def _distance_to_polylines(pix: np.ndarray, polys: np.ndarray) -> np.ndarray:
 
 
 def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24) -> np.ndarray:
-    """(S,) whether each floor segment's image runs within :data:`CONFUSION_PX` working px of a near wall's
-    top rail (glass or mesh top, :attr:`CourtLines.structure`) along :data:`CONFUSION_SHARE` of its visible
-    length. Seen from a camera right behind the glass, the near wall's top rail hides the near service
-    line or lies next to it as a second bright line: its pixels cannot tell the paint from the rail."""
+    """(S,) whether each floor segment of the near half of the court (both ends nearer than the net) runs
+    within :data:`CONFUSION_PX` working px of a near wall's top rail (glass or mesh top,
+    :attr:`CourtLines.structure`) in the image along :data:`CONFUSION_SHARE` of its visible length. Seen from
+    a camera right behind the glass, the near wall's top rail hides the near service line or lies next to it
+    as a second bright line: its pixels cannot tell the paint from the rail. A far line is not marked: seen
+    from a broadcast camera high behind the court, the near fence's top runs just beside the far service
+    line and baseline, but as a line of its own (the rail is nearer and thicker, the far paint thin), and the
+    placement tests (net, unexplained paint) and the margin judge such a view."""
     S = len(model.segments_3d)
     if not len(model.structure):
         return np.zeros(S, dtype=bool)
@@ -357,6 +365,8 @@ def confused_segments(cam: Camera, model: CourtLines, scale: float, n: int = 24)
     pts = _projected_polylines(cam, model.segments_3d, n)
     out = np.zeros(S, dtype=bool)
     for i in range(S):
+        if np.any(model.segments_3d[i, :, 1] >= model.net_y):
+            continue
         q = pts[i]
         seen = np.isfinite(q).all(1) & (q[:, 0] >= 0) & (q[:, 0] <= w) & (q[:, 1] >= 0) & (q[:, 1] <= h)
         if seen.sum() < 2:
@@ -438,7 +448,12 @@ def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: floa
     """Share of the line pixels inside the fitted court's floor (its projected outline) that lie on none of
     the court's modelled lines (paint, net, glass and mesh edges: ``court.lines``) by more than ``band_px``
     working px. A right fit explains nearly all of them; a fit that laid the court's near lines on the
-    walls' rails leaves the real painted lines unexplained inside it."""
+    walls' rails leaves the real painted lines unexplained inside it. Where a mesh panel (``court.planes``
+    of material ``mesh``) lies over the far half of the floor in the image — the near fence's top above the
+    far court, seen from a broadcast camera high behind it — the pixels are not counted: the wires and posts
+    in front of the floor say nothing about its paint. Over the near half (a camera right behind the glass
+    sees the near fence over the near service line) they are: there a court laid on the rails leaves the
+    real near line unexplained."""
     segs = np.concatenate([np.asarray(v, dtype=float).reshape(-1, 2, 3) for v in court.lines.values()])
     x1, y1 = court.size[:2]
     corners = np.array([[0.0, 0.0, 0.0], [x1, 0.0, 0.0], [x1, y1, 0.0], [0.0, y1, 0.0]])
@@ -448,11 +463,30 @@ def unexplained_share(cam: Camera, court: Court, ev: LineEvidence, band_px: floa
     h, w = ev.mask.shape
     floor = np.zeros((h, w), np.uint8)
     cv2.fillPoly(floor, [np.round((outline + 0.5) * ev.scale - 0.5).astype(np.int32)], 1)
+    far = _image_region(cam, np.array([[0.0, court.net_y, 0.0], [x1, court.net_y, 0.0], [x1, y1, 0.0],
+                                       [0.0, y1, 0.0]]), ev.scale, (h, w), n)
+    mesh = np.zeros((h, w), np.uint8)
+    for plane in court.planes:
+        if plane.material == "mesh":
+            mesh |= _image_region(cam, plane.corners_3d(), ev.scale, (h, w), n)
+    floor[(far & mesh).astype(bool)] = 0
     ys, xs = np.nonzero(ev.mask & floor.astype(bool))
     if len(xs) < 20:
         return float("nan")
     d = _line_distance_map(_projected_polylines(cam, segs, n), ev.scale, (h, w))
     return float(np.mean(d[ys, xs] > band_px))
+
+
+def _image_region(cam: Camera, corners: np.ndarray, scale: float, shape: tuple[int, int],
+                  n: int = 24) -> np.ndarray:
+    """(h, w) uint8 mask (working scale) of a 3D polygon's image (corners (M, 3)); empty when a corner lies
+    behind the camera."""
+    out = np.zeros(shape, np.uint8)
+    sides = np.stack([corners, np.roll(corners, -1, axis=0)], axis=1)
+    edges = _projected_polylines(cam, sides, n).reshape(-1, 2)
+    if np.isfinite(edges).all() and np.all(cam.depth(corners) > 0):
+        cv2.fillPoly(out, [np.round((edges + 0.5) * scale - 0.5).astype(np.int32)], 1)
+    return out
 
 
 def _line_distance_map(polys: np.ndarray, scale: float, shape: tuple[int, int], subpixel: int = 4) -> np.ndarray:
@@ -567,7 +601,7 @@ def _candidates(ev_search: LineEvidence, ev: LineEvidence, model: CourtLines, si
     """Correspondence hypotheses on ``ev_search`` (the background undistorted by ``k_img``, see
     :func:`_undistorted`; ``ev`` itself when 0), each a camera refined on the real line pixels and evaluated
     on ``ev``; and a note of what the search found."""
-    trans, longi = split_lines(hough_lines(ev_search), size)
+    trans, longi = split_lines(find_lines(ev_search), size)
     Hs = hypotheses(trans, longi, model, size, net_y)
     cands: list[_Candidate] = []
     f0 = 0.5 * float(np.hypot(*size))
@@ -694,6 +728,9 @@ def _judge(out: AutoFit, best: _Candidate, margin: float, confused: np.ndarray, 
                         "other lines and the net put it (it may be fitted on a rail or the fence's wires)")
     if not (c[2] > 1.0 and c[1] < court.net_y):
         problems.append(f"implausible camera position {np.round(c, 1).tolist()}")
+    elif elevation_deg(c, np.asarray(court.size[:2], float) / 2) < MIN_ELEVATION_DEG:
+        problems.append(f"the camera would see the floor at under {MIN_ELEVATION_DEG:.0f}° (from "
+                        f"{np.round(c, 1).tolist()}): the court is laid on upright structure seen edge-on")
     out.accepted = not problems
     out.reason = "; ".join(problems)
     cam.source = "auto"

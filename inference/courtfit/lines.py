@@ -138,26 +138,50 @@ def _tls(pts: np.ndarray) -> tuple[np.ndarray, float]:
     return n, float(n @ c)
 
 
-def hough_lines(ev: LineEvidence, max_lines: int = 48, min_length_frac: float = 0.05) -> list[ImageLine]:
+def hough_lines(ev: LineEvidence, max_lines: int = 48, min_length_frac: float = 0.05,
+                angles: tuple[float, float] | None = None, kept: Sequence[ImageLine] = (),
+                depth: int | None = None) -> list[ImageLine]:
     """Straight lines through the line pixels, strongest first, duplicates merged, each refitted by TLS.
 
     Args:
         ev: the line evidence.
         max_lines: at most this many lines.
         min_length_frac: a line needs at least this fraction of the working image's larger side in votes.
+        angles: only lines whose direction lies this many degrees (low, high) from the image's x axis (either
+            way); None: every direction.
+        kept: lines found before: a duplicate of one of them is not returned, and the line pixels on them
+            (within 1.5 working px) do not count for the new lines: a line that crosses a dense band of kept
+            lines at a shallow angle collects many votes from their pixels, but none of its own.
+        depth: accumulator peaks examined, strongest first (default 40 per line asked for).
     """
     h, w = ev.mask.shape
     thresh = max(20, int(min_length_frac * max(h, w)))
-    found = cv2.HoughLinesWithAccumulator(ev.mask.astype(np.uint8), 1, np.pi / 360, thresh)
-    if found is None:
-        return []
-    found = found.reshape(-1, 3)
-    found = found[np.argsort(-found[:, 2])]
+    if angles is None:
+        found = cv2.HoughLinesWithAccumulator(ev.mask.astype(np.uint8), 1, np.pi / 360, thresh)
+        if found is None:
+            return []
+        found = found.reshape(-1, 3)
+        found = found[np.argsort(-found[:, 2])]
+    else:  # two ranges of the normal's angle θ (the direction's + 90°)
+        a0, a1 = np.radians(angles[0]), np.radians(angles[1])
+        parts = [cv2.HoughLinesWithAccumulator(ev.mask.astype(np.uint8), 1, np.pi / 360, thresh,
+                                               min_theta=max(t0, 0.0), max_theta=min(t1, np.pi))
+                 for t0, t1 in ((np.pi / 2 - a1, np.pi / 2 - a0), (np.pi / 2 + a0, np.pi / 2 + a1))]
+        parts = [f.reshape(-1, 3) for f in parts if f is not None]
+        if not parts:
+            return []
+        found = np.concatenate(parts)
+        found = found[np.argsort(-found[:, 2], kind="stable")]
     ys, xs = np.nonzero(ev.mask)
     wpix = np.stack([xs, ys], axis=1).astype(float)
     lines: list[ImageLine] = []
+    kept = list(kept)
+    if kept:
+        full = (wpix + 0.5) / ev.scale - 0.5
+        on_kept = np.min([k.distance(full) for k in kept], axis=0) * ev.scale < 1.5
+        wpix = wpix[~on_kept]
     probes = np.linspace(0, 1, 9)
-    for rho, theta, _ in found[: 40 * max_lines]:
+    for rho, theta, _ in found[: depth or 40 * max_lines]:
         n = np.array([np.cos(theta), np.sin(theta)])
         near = wpix[np.abs(wpix @ n - rho) < 2.5]
         if len(near) < thresh // 2:
@@ -173,10 +197,13 @@ def hough_lines(ev: LineEvidence, max_lines: int = 48, min_length_frac: float = 
         d = np.array([-n[1], n[0]])
         lo, hi = np.quantile(near @ d, [0.02, 0.98])
         pts = (c * n + np.outer(lo + probes * (hi - lo), d) + 0.5) / ev.scale - 0.5
-        if any(np.median(k.distance(pts)) * ev.scale < 4.0 for k in lines):
+        if any(np.median(k.distance(pts)) * ev.scale < 4.0 for k in kept + lines):
             continue
         full_c = (c + 0.5 * n.sum()) / ev.scale - 0.5 * n.sum()
-        lines.append(ImageLine(n, float(full_c), int(len(near))))
+        line = ImageLine(n, float(full_c), int(len(near)))
+        if angles is not None and not angles[0] <= abs(line.angle_deg) <= angles[1]:
+            continue  # the refit turned it out of the range asked for
+        lines.append(line)
         if len(lines) >= max_lines:
             break
     return lines

@@ -45,6 +45,7 @@ class CourtLines:
         structure: (T, 2, 3) raised transverse edges of the near walls (glass and mesh tops): rails between
             the camera and the court that can hide or double a painted line in the image (see
             :func:`.fit.confused_segments`).
+        net_y: y of the net (the near half of the court lies below it).
     """
 
     segments: np.ndarray
@@ -52,6 +53,7 @@ class CourtLines:
     longitudinal: tuple[ModelLine, ...]
     raised: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
     structure: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    net_y: float = float("inf")
 
     @property
     def segments_3d(self) -> np.ndarray:
@@ -102,7 +104,8 @@ def court_lines(court: Court) -> CourtLines:
     structure = np.array(near, dtype=float).reshape(-1, 2, 3)
     return CourtLines(np.array(segs, dtype=float).reshape(-1, 2, 2),
                       tuple(ModelLine("transverse", y) for y in sorted(trans, reverse=True)),
-                      tuple(ModelLine("longitudinal", x) for x in sorted(longi)), raised, structure)
+                      tuple(ModelLine("longitudinal", x) for x in sorted(longi)), raised, structure,
+                      float(court.net_y))
 
 
 def court_line_samples(cam: Camera, court: Court, step_m: float = 0.1) -> np.ndarray:

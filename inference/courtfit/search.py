@@ -5,8 +5,9 @@ court frame puts the camera behind the near baseline) and *longitudinal* (the re
 between both limits are tried as both). A hypothesis pairs two transverse and two longitudinal image lines
 with two model lines of each kind in the same order (far before near, left before right — the court frame
 has no mirror); their four crossings give a floor → image homography. Hypotheses whose homography admits
-no square-pixel camera above the floor on the near side (Zhang's constraints) are dropped; the rest are
-scored on the line-pixel distance map by how much of the projected court lands on line pixels.
+no square-pixel camera above the floor on the near side (Zhang's constraints) that sees the court's centre
+at least :data:`MIN_ELEVATION_DEG` below the horizon are dropped; the rest are scored on the line-pixel
+distance map by how much of the projected court lands on line pixels.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .lines import ImageLine, LineEvidence
+from .lines import ImageLine, LineEvidence, hough_lines
 from .model import CourtLines
 
 TRANSVERSE_MAX_DEG = 32.0
@@ -28,6 +29,7 @@ MIN_SEPARATION = 0.008  # of the larger image side: closer lines count as one (s
 HIT_PX = 1.5  # working px: a projected model point this close to a line pixel is supported
 MISS_WEIGHT = 0.5
 FOCAL_RANGE = (0.25, 10.0)  # focal length / larger image side
+MIN_ELEVATION_DEG = 5.0  # the camera sees the court's centre at least this far below the horizon
 SAMPLE_STEP_M = 0.2
 MAX_SAMPLE_PX = 12.0
 CHUNK = 4000
@@ -41,6 +43,21 @@ class Hypothesis:
     score: float
     supported_px: float
     visible_px: float
+
+
+def find_lines(ev: LineEvidence) -> list[ImageLine]:
+    """The image's straight lines (:func:`.lines.hough_lines`), and when fewer than :data:`MAX_LINES_PER_KIND`
+    of them run in one of the two directions, the strongest further lines of that direction (a Hough
+    transform over those angles only). A broadcast view of a padel court is crossed by many strong transverse
+    lines — the walls' rails, the fence's wires, the net, advertising boards, a score box — whose slightly
+    tilted copies alone can fill the list, leaving none of the court's longitudinal lines (a real view: 46 of
+    48 lines transverse, the centre line and the side walls' bases not among them)."""
+    lines = hough_lines(ev)
+    for angles in ((0.0, TRANSVERSE_MAX_DEG), (LONGITUDINAL_MIN_DEG, 90.0)):
+        have = sum(1 for k in lines if angles[0] <= abs(k.angle_deg) <= angles[1])
+        if have < MAX_LINES_PER_KIND:  # as many as the selection (:func:`_separated`) may keep
+            lines += hough_lines(ev, 2 * MAX_LINES_PER_KIND - have, angles=angles, kept=lines, depth=40 * 48)
+    return lines
 
 
 def split_lines(lines: list[ImageLine], size: tuple[int, int]) -> tuple[list[ImageLine], list[ImageLine]]:
@@ -145,7 +162,16 @@ def _plausible(Hn: np.ndarray, centre_xy: np.ndarray, net_y: float, t_model: np.
     r1, r2, t = (M[:, :, k] * lam[:, None] for k in range(3))
     r3 = np.cross(r1, r2)
     C = -np.stack([np.sum(r1 * t, 1), np.sum(r2 * t, 1), np.sum(r3 * t, 1)], axis=1)
-    return ok & (C[:, 2] > 0.5) & (C[:, 1] < net_y)
+    return ok & (C[:, 2] > 0.5) & (C[:, 1] < net_y) & (elevation_deg(C, centre_xy) >= MIN_ELEVATION_DEG)
+
+
+def elevation_deg(C: np.ndarray, centre_xy: np.ndarray) -> np.ndarray:
+    """(..., 3) camera centres → (...) the angle (degrees) below the horizon at which each sees the floor
+    point ``centre_xy`` (the court's centre). Under :data:`MIN_ELEVATION_DEG` a camera sees the floor so
+    obliquely that the court's depth shrinks more than tenfold in the image: such a placement lays the court
+    on upright structure (a wall's rails and posts) seen edge-on, not on the floor."""
+    C = np.asarray(C, float)
+    return np.degrees(np.arctan2(C[..., 2], np.hypot(C[..., 0] - centre_xy[0], C[..., 1] - centre_xy[1])))
 
 
 def hypotheses(trans: list[ImageLine], longi: list[ImageLine], model: CourtLines, size: tuple[int, int],
