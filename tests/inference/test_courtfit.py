@@ -245,7 +245,8 @@ def test_court_lines_along_the_view_are_kept_under_dense_transverse_structure():
 
 def test_edge_on_placements_are_implausible():
     """A placement that lays the court on a wall's rails and posts seen edge-on puts the camera far away and
-    low (a rendered tour view was accepted 87 m away, 7 m high): it sees the floor under 5°."""
+    low (rendered tour view 3012, its glass joints drawn bright, was accepted 129 m away, 7 m high, before
+    this check): it sees the floor under 5°."""
     centre = np.array([5.0, 10.0])
     assert elevation_deg(np.array([5.0, -13.8, 7.0]), centre) > 15  # the real tour camera
     assert elevation_deg(np.array([5.5, -36.9, 10.0]), np.array([5.485, 11.885])) > 10  # a real tennis camera
