@@ -335,12 +335,11 @@ def break_frame(uv: np.ndarray, first: int, last: int, half: int = 8, margin: in
     needs 4 points), or None. Local windows keep a quadratic adequate under perspective, and the fit is robust
     to the pixel noise that decides the sharpest second difference: a far player's hit turns the track by a
     few pixels per frame, as much as 2 px of noise does."""
-    frames = np.arange(len(uv))
     ok = np.isfinite(uv).all(axis=1)
 
     def sse(a: int, b: int) -> float:
         m = ok[a:b + 1]
-        tt, yy = frames[a:b + 1][m], uv[a:b + 1][m]
+        tt, yy = np.arange(a, b + 1)[m], uv[a:b + 1][m]
         if len(tt) < 4:
             return np.nan
         A = np.stack([np.ones(len(tt)), tt - tt[0], (tt - tt[0]) ** 2], axis=1)
@@ -358,18 +357,16 @@ def break_frame(uv: np.ndarray, first: int, last: int, half: int = 8, margin: in
 
 def turn_frames(uv: np.ndarray, first: int, last: int, half: int = 2, margin: int = 3) -> list[int]:
     """Where the ball is highest and lowest in the picture inside ``[first + margin, last - margin]`` (the track
-    ``uv`` (T, 2) averaged over ``2 half + 1`` frames), when that is not at an end: a racket hit far from the
+    ``uv`` (T, 2) as its median over ``2 half + 1`` frames, :func:`inference.events.rally.running_median`), when that is not at an end: a racket hit far from the
     camera turns the ball from going away to coming back, which the picture shows as its highest point with
     hardly a kink (the change is along the line of sight); a near hit as its lowest point."""
+    from inference.events.rally import running_median
+
     lo, hi = first + margin, last - margin
     if hi - lo < 2:
         return []
-    v = uv[first:last + 1, 1]
-    k = np.ones(2 * half + 1)
-    ok = np.isfinite(v)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        smooth = np.convolve(np.where(ok, v, 0.0), k, "same") / np.convolve(ok.astype(float), k, "same")
-    smooth[~ok] = np.nan
+    smooth = running_median(uv[first:last + 1], half)[:, 1]
+    smooth[~np.isfinite(uv[first:last + 1, 1])] = np.nan
     inner = smooth[lo - first:hi - first + 1]
     if not np.isfinite(inner).any():
         return []
