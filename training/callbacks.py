@@ -20,7 +20,7 @@ from pathlib import Path
 
 import lightning as L
 import torch
-from lightning.pytorch.callbacks import Callback
+from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 
 log = logging.getLogger(__name__)
 
@@ -76,6 +76,11 @@ class SafeCheckpoint(Callback):
             self.save(trainer, f"step {step}")
 
     def on_train_epoch_end(self, trainer, pl_module) -> None:
+        # Lightning calls checkpoint callbacks last: a ModelCheckpoint that saves now updates its best-model state
+        # first (its own call then finds the step done), so last.ckpt holds it and a resumed run keeps its best
+        for cb in trainer.checkpoint_callbacks:
+            if isinstance(cb, ModelCheckpoint):
+                cb.on_train_epoch_end(trainer, pl_module)
         self.save(trainer, f"end of {epoch_of(trainer)}")
 
     def on_exception(self, trainer, pl_module, exception: BaseException) -> None:

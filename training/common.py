@@ -4,9 +4,16 @@ composed config, debug modes and progress, resuming from a checkpoint, the guard
 results files. It imports no task, so the tasks can import it (no import circle)."""
 from __future__ import annotations
 
+import csv
+import filecmp
 import logging
+import os
+import re
+import shutil
 import sys
 import traceback
+import warnings
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -119,6 +126,7 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
 
     apply_debug(cfg)
     one_line_per_record()
+    continued = continue_run(cfg)  # before callbacks and loggers read paths.output_dir
     quiet_sync_dist_advice()
     if cfg.get("seed") is not None:
         L.seed_everything(cfg.seed, workers=True)
@@ -133,7 +141,7 @@ def build(cfg: DictConfig) -> tuple[L.LightningDataModule, L.LightningModule, L.
         init_detector(model, init_source(cfg), cfg)
     kw = {"enable_progress_bar": progress_bar(cfg)} if "enable_progress_bar" not in cfg.trainer else {}
     trainer = hydra.utils.instantiate(cfg.trainer, callbacks=with_progress(instantiate_group(cfg.get("callbacks")), cfg),
-                                      logger=instantiate_group(cfg.get("logger")) or False, **kw)
+                                      logger=instantiate_loggers(cfg, continued) or False, **kw)
     log_hyperparameters(cfg, model, trainer)
     return datamodule, model, trainer
 
@@ -202,17 +210,221 @@ def find_last_checkpoint(cfg: DictConfig, experiment: str | None = None) -> Path
 
 
 def resume_path(cfg: DictConfig) -> str | None:
-    """``ckpt_path`` resolved (``last`` → :func:`find_last_checkpoint`); checked against the allow-list."""
+    """``ckpt_path`` resolved (``last`` → :func:`find_last_checkpoint`); checked against the allow-list.
+    After :func:`build` it is the file :func:`continue_run` resolved and checked (read once)."""
     ckpt = cfg.get("ckpt_path")
     if not ckpt:
         return None
     if str(ckpt) == "last":
         ckpt = str(find_last_checkpoint(cfg, current_experiment()))
         log.info("resuming from %s", ckpt)
+    checkpoint_info(ckpt, trust=bool(cfg.get("trust_checkpoint", False)))  # refuses pickled objects first
+    return str(ckpt)
+
+
+# ------------------------------------------------------------------------------------------------ resuming
+HYDRA_OUTPUT_DIR = "hydra:runtime.output_dir"
+"""What ``paths.output_dir`` is unless the user sets it (conf/paths/default.yaml): Hydra's run folder."""
+CONTINUED_NOTE = "continued_in.txt"
+"""Written in Hydra's new folder of a run that continues in the folder of the checkpoint it resumes."""
+RESUMES_LOG = "resumes.log"
+"""One line per resume, in the continued run folder: when, from which checkpoint, the resume's config folder."""
+_checked: dict[tuple, dict[str, int]] = {}
+_continued_log: logging.Handler | None = None
+
+
+def checkpoint_info(path: str | Path, trust: bool = False) -> dict[str, int]:
+    """Read ``path`` through the allow-list (an error on pickled objects unless ``trust``) and return its
+    ``epoch`` and ``global_step``; the same unchanged file is read once (build, then fit, ask twice)."""
     from inference.models.checkpoint import read_checkpoint
 
-    read_checkpoint(ckpt, trust=bool(cfg.get("trust_checkpoint", False)))  # refuses pickled objects first
-    return str(ckpt)
+    st = Path(path).stat() if Path(path).is_file() else None
+    key = (str(Path(path).resolve()), st and st.st_mtime_ns, st and st.st_size, bool(trust))
+    if key not in _checked:
+        state = read_checkpoint(path, trust=trust)
+        _checked.clear()
+        _checked[key] = {k: int(state.get(k, 0) or 0) for k in ("epoch", "global_step")} \
+            if isinstance(state, dict) else {"epoch": 0, "global_step": 0}
+    return _checked[key]
+
+
+def run_folder_of(ckpt: str | Path) -> Path | None:
+    """The run folder of a checkpoint (``<run>/checkpoints/NAME.ckpt`` → ``<run>``), None elsewhere."""
+    p = Path(ckpt).resolve()
+    return p.parent.parent if p.parent.name == "checkpoints" else None
+
+
+def new_folder_reason(cfg: DictConfig) -> str | None:
+    """Why a resumed run writes to a folder of its own instead of continuing in its checkpoint's run folder
+    (None: it continues): ``resume_new_folder=true``, ``paths.output_dir=`` or ``hydra.run.dir=`` given,
+    a sweep's trial, a debug run."""
+    if cfg.get("resume_new_folder"):
+        return "resume_new_folder=true"
+    if cfg.get("debug") is not None or ("trainer" in cfg and cfg.trainer.get("fast_dev_run")):
+        return "a debug run"
+    if HYDRA_OUTPUT_DIR not in str(OmegaConf.to_container(cfg.paths, resolve=False).get("output_dir")):
+        return "paths.output_dir is set"
+    try:
+        from hydra.core.hydra_config import HydraConfig
+        from hydra.types import RunMode
+
+        hc = HydraConfig.get()
+    except (ValueError, ImportError):
+        return None
+    if hc.mode == RunMode.MULTIRUN:
+        return "a sweep: each trial keeps its own folder"
+    overrides = [str(o) for o in hc.overrides.hydra]
+    run_dirs = [o for o in overrides if o.startswith("hydra.run.dir=")]
+    if any(o.startswith("hydra.job.name=train_ddp_process_") for o in overrides):
+        run_dirs = run_dirs[:-1]  # a DDP process Lightning started: its last hydra.run.dir is the first process's
+    return "hydra.run.dir is set" if run_dirs else None
+
+
+def _rank_zero() -> bool:
+    from lightning.fabric.utilities.rank_zero import rank_zero_only
+
+    return getattr(rank_zero_only, "rank", 0) == 0
+
+
+def _backup(path: Path) -> Path | None:
+    """Copy ``path`` to ``path.bak`` (``.bak2``, … when an older, different copy is there); returns the copy."""
+    if not path.is_file():
+        return None
+    n = 1
+    while True:
+        bak = path.with_name(f"{path.name}.bak" + (str(n) if n > 1 else ""))
+        if bak.is_file() and filecmp.cmp(path, bak, shallow=False):
+            return bak
+        if not bak.exists():
+            shutil.copy2(path, bak)
+            return bak
+        n += 1
+
+
+def continue_run(cfg: DictConfig) -> Path | None:
+    """Resuming (``ckpt_path=PATH|last``, ``train=true``): the run continues in the run folder of the checkpoint
+    (``<run>/checkpoints/*.ckpt``), unless :func:`new_folder_reason`. Called by :func:`build` before any
+    callback or logger is made; returns the continued folder (None: no resume, or a new folder).
+
+    Continuing: ``cfg.ckpt_path`` becomes the resolved file and ``cfg.paths.output_dir`` the run folder, so
+    ``checkpoints/`` (ModelCheckpoint's dirpath is the checkpoint's, so its best score and path are restored:
+    a worse epoch never becomes the best), the CSV/TensorBoard logs (appended, :func:`instantiate_loggers`),
+    the exported model file and the results are the original run's. Before anything is replaced, the run's
+    model files (``*.pth.tar``), ``results.{json,csv}``, ``export_path`` and — when another checkpoint than
+    ``last.ckpt`` is resumed — ``last.ckpt`` are copied to ``*.bak``. Hydra's new folder keeps this resume's
+    config (``.hydra/``) and log, and a note (:data:`CONTINUED_NOTE`) naming the continued folder; the run
+    folder gets a line in :data:`RESUMES_LOG` and this run's log records in its log file."""
+    global _continued_log
+
+    if not cfg.get("ckpt_path") or not cfg.get("train", True):
+        return None
+    trust = bool(cfg.get("trust_checkpoint", False))
+    ckpt = Path(str(cfg.ckpt_path))
+    if str(cfg.ckpt_path) == "last":
+        ckpt = find_last_checkpoint(cfg, current_experiment())
+    ckpt = ckpt.resolve()
+    info = checkpoint_info(ckpt, trust=trust)
+    with open_dict(cfg):
+        cfg.ckpt_path = str(ckpt)  # resolved once: resume_path() returns this file
+    here = Path(cfg.paths.output_dir).resolve()
+    run = run_folder_of(ckpt)
+    reason = None if run == here else new_folder_reason(cfg)
+    if reason is None and run is None:
+        reason = "the checkpoint is not in a run's checkpoints/ folder"
+    if reason is None and not os.access(run, os.W_OK):
+        reason = f"{run} is not writable"
+    if reason:
+        log.info("resuming from %s: writing to the new run folder %s (%s)", ckpt, here, reason)
+        return None
+    if _rank_zero():
+        if run != here:
+            _continued_log = _log_to(run, here, _continued_log)
+            here.mkdir(parents=True, exist_ok=True)
+            (here / CONTINUED_NOTE).write_text(
+                f"This run resumed {ckpt} and continues in {run}: its checkpoints, logs, model file and results "
+                f"are there (set resume_new_folder=true to write to a new folder instead). This folder keeps the "
+                f"resume's config (.hydra/) and log.\n")
+        log.info("resuming from %s: continuing in %s (saved in epoch %d at step %d; this resume's config and log: %s)",
+                 ckpt, run, info["epoch"] + 1, info["global_step"], here)
+        last = run / "checkpoints" / str(OmegaConf.select(cfg, "callbacks.last_checkpoint.filename",
+                                                          default="last.ckpt") or "last.ckpt")
+        keep = [*sorted(run.glob("*.pth.tar")), run / "results.json", run / "results.csv",
+                *([Path(cfg.export_path)] if cfg.get("export_path") else []), *([last] if last != ckpt else [])]
+        for path in keep:
+            bak = _backup(path)
+            if bak is not None:
+                log.info("kept a copy of %s as %s before the resumed run replaces it", path, bak.name)
+        with (run / RESUMES_LOG).open("a") as f:
+            f.write(f"{datetime.now().isoformat(timespec='seconds')} resumed from {ckpt} (saved in epoch "
+                    f"{info['epoch'] + 1} at step {info['global_step']}); this resume's config and log: {here}\n")
+    with open_dict(cfg):
+        cfg.paths.output_dir = str(run)
+    warnings.filterwarnings("ignore", message=re.escape(f"Checkpoint directory {os.path.realpath(run / 'checkpoints')}"
+                                                        ) + " exists and is not empty")
+    return run
+
+
+def _log_to(run: Path, hydra_dir: Path, previous: logging.Handler | None) -> logging.Handler | None:
+    """Append this process's log records to the continued run's log file (Hydra's own, ``train.log``, stays
+    in ``hydra_dir``); replaces the handler an earlier call added."""
+    root = logging.getLogger()
+    if previous is not None:
+        root.removeHandler(previous)
+        previous.close()
+    hydra_files = [h for h in root.handlers if isinstance(h, logging.FileHandler)
+                   and Path(h.baseFilename).resolve().parent == hydra_dir]
+    if not hydra_files:
+        return None  # no Hydra log file (an API caller, a test)
+    handler = logging.FileHandler(run / Path(hydra_files[0].baseFilename).name, mode="a")
+    handler.setFormatter(hydra_files[0].formatter)
+    handler.setLevel(hydra_files[0].level)
+    root.addHandler(handler)
+    return handler
+
+
+def instantiate_loggers(cfg: DictConfig, continued: Path | None = None) -> list[Any]:
+    """The ``logger`` group; in a continued run (:func:`continue_run`) every logger without a ``version``
+    writes to the newest ``version_N`` folder the run already has (CSV: ``metrics.csv`` appended, its rows
+    kept; TensorBoard: a new events file beside the old ones) instead of starting ``version_N+1``."""
+    loggers = instantiate_group(cfg.get("logger"))
+    if continued is None:
+        return loggers
+    nodes = [c for c in cfg.get("logger").values() if isinstance(c, DictConfig) and "_target_" in c]
+    out = []
+    for node, logger in zip(nodes, loggers):
+        root = getattr(logger, "root_dir", None)
+        versions = [int(p.name[8:]) for p in Path(root).glob("version_*") if p.is_dir() and p.name[8:].isdigit()] \
+            if root and node.get("version") is None else []
+        if versions:
+            logger = hydra.utils.instantiate(node, version=max(versions))
+            _keep_metrics_csv(logger)
+        out.append(logger)
+    return out
+
+
+def _keep_metrics_csv(logger) -> None:
+    """Lightning's CSV writer deletes an existing ``metrics.csv`` when it starts; keep its rows (the writer
+    then appends, rewriting the header only when new columns come)."""
+    from lightning.fabric.loggers import CSVLogger
+
+    if not isinstance(logger, CSVLogger) or not _rank_zero():
+        return
+    path = Path(logger.log_dir) / "metrics.csv"
+    aside = path.with_name(".metrics.csv.resuming")
+    if aside.is_file() and not path.exists():
+        os.replace(aside, path)  # an earlier resume stopped between the two renames
+    if not path.is_file():
+        return
+    os.replace(path, aside)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Experiment logs directory")
+            writer = logger.experiment
+    finally:
+        os.replace(aside, path)
+    with path.open(newline="") as f:
+        header = next(csv.reader(f), [])
+    writer.metrics_keys = list(header)
 
 
 def save_manifests(datamodule, cfg: DictConfig) -> None:
