@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +43,13 @@ class DataSource:
     manifest: Manifest
     inferred: bool = False
     weight: float | None = None
+    stated: int = 0          # clips whose clip.yaml states their split (inferred manifests)
+    carved: list[str] = field(default_factory=list)  # training clips moved to val (no val split was given)
+
+    def eval_split(self) -> str:
+        """What ``split=auto`` scores: every clip of a plain folder whose clips state no split, else the
+        test split (a folder where any clip says ``split:`` is a dataset like one with manifest.yaml)."""
+        return "all" if self.inferred and not self.stated else "test"
 
     def paths(self, split: str | None) -> list[Path]:
         """Clip folders of ``split`` (``None`` or ``all``: every clip)."""
@@ -63,6 +70,11 @@ def group_of(clip: Clip, name: str) -> str:
 def infer_manifest(root: str | Path, seed: int = 0, fractions: Sequence[float] = FRACTIONS) -> Manifest:
     """A manifest for a folder of clip folders (see the module docstring). Raises FileNotFoundError
     naming the folder when it holds no clip folder."""
+    return _infer(root, seed, fractions)[0]
+
+
+def _infer(root: str | Path, seed: int, fractions: Sequence[float]) -> tuple[Manifest, int]:
+    """:func:`infer_manifest` and how many clips state their split in clip.yaml."""
     from training.synth.generate import split_assignment
 
     root = Path(root)
@@ -83,7 +95,30 @@ def infer_manifest(root: str | Path, seed: int = 0, fractions: Sequence[float] =
     split = {**fixed, **{f: assigned[g] for g, fs in groups.items() for f in fs}}
     by_match = any(g.startswith("match:") for g in names)
     return Manifest(root, [ManifestEntry(f, split[f]) for f in folders], name=root.name,
-                    source=f"inferred by rally3d training: split by {'match' if by_match else 'clip'}, seed {seed}")
+                    source=f"inferred by rally3d training: split by {'match' if by_match else 'clip'}, seed {seed}"
+                    ), len(fixed)
+
+
+def carve_val(manifest: Manifest, seed: int = 0, fraction: float = FRACTIONS[1]) -> list[str]:
+    """Give a manifest with training clips but no val split one: a seeded ``fraction`` of the training
+    groups (clip.yaml's ``match``, else the clip; at least one) become ``val``, never the last training
+    group. Returns the clips moved (changed in place; none when there is a val split or < 2 groups)."""
+    if any(c.split == "val" for c in manifest.clips):
+        return []
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(manifest.clips):
+        if c.split == "train":
+            path = manifest.root / c.path
+            key = group_of(Clip(path), c.path) if (path / "clip.yaml").is_file() else f"clip:{c.path}"
+            groups.setdefault(key, []).append(i)
+    if len(groups) < 2:
+        return []
+    names = sorted(groups)
+    k = min(max(int(round(len(names) * fraction)), 1), len(names) - 1)
+    moved = sorted(i for j in np.random.default_rng(seed).permutation(len(names))[:k] for i in groups[names[j]])
+    for i in moved:
+        manifest.clips[i] = ManifestEntry(manifest.clips[i].path, "val")
+    return sorted(manifest.clips[i].path for i in moved)
 
 
 def resolve_source(root: str | Path, seed: int = 0, fractions: Sequence[float] = FRACTIONS,
@@ -97,11 +132,18 @@ def resolve_source(root: str | Path, seed: int = 0, fractions: Sequence[float] =
     refuse_unfinished(root)
     if (root / "manifest.yaml").is_file() or is_manifest_file(root):
         manifest = Manifest.load(root)
-        return DataSource(manifest.root, manifest, False, weight)
-    if (root / "clip.yaml").is_file():  # a single clip folder: a dataset of one clip
+        source = DataSource(manifest.root, manifest, False, weight)
+    elif (root / "clip.yaml").is_file():  # a single clip folder: a dataset of one clip
         return DataSource(root.parent, Manifest(root.parent, [ManifestEntry(root.name, "train")], name=root.name,
                                                 source="a single clip folder"), True, weight)
-    return DataSource(root, infer_manifest(root, seed, fractions), True, weight)
+    else:
+        manifest, stated = _infer(root, seed, fractions)
+        source = DataSource(root, manifest, True, weight, stated)
+    source.carved = carve_val(source.manifest, seed, fractions[1] / max(sum(fractions), 1e-9))
+    if source.carved:
+        log.info("%s has no val split: validating on %d training clip(s) set aside by clip (seed %d): %s", root,
+                 len(source.carved), seed, ", ".join(source.carved))
+    return source
 
 
 def as_list(root) -> list[str]:
@@ -182,5 +224,5 @@ def skip_unlabelled(clips: list[Clip], needs: str, where: str) -> list[Clip]:
     return keep
 
 
-__all__ = ["DataSource", "as_list", "ball_input", "clip_folders", "format_manifest", "infer_manifest",
+__all__ = ["DataSource", "as_list", "ball_input", "carve_val", "clip_folders", "format_manifest", "infer_manifest",
            "resolve_source", "resolve_sources", "save_inferred", "skip_unlabelled"]

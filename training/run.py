@@ -157,11 +157,10 @@ def eval_device(cfg: DictConfig) -> str:
 
 
 def eval_split(cfg: DictConfig, source) -> str:
-    """``split: auto``: the test split of a dataset with manifest.yaml, every clip of a plain folder."""
+    """``split: auto``: the test split of a dataset (manifest.yaml, or clips whose clip.yaml state a split),
+    every clip of a plain folder of clips that state none."""
     split = str(cfg.get("split") or "auto")
-    if split == "auto":
-        return "all" if source.inferred else "test"
-    return split
+    return source.eval_split() if split == "auto" else split
 
 
 def eval_clips(cfg: DictConfig) -> tuple[list, str, str]:

@@ -144,15 +144,21 @@ class BallDetectorRunner:
         return probs, time.perf_counter() - t0
 
     def _windows(self, frames):
-        """``(start, frames)`` of each detector window over the frame stream."""
+        """``(start, frames)`` of each detector window over the frame stream; when the stream's last frames
+        fall after the last window, one more window ends at the last frame (its earlier frames repeat:
+        :func:`tail_skip` says how many of its outputs are new), so every frame is searched."""
         window: deque = deque(maxlen=self.frames_in)
         last_start = -self.step
+        i = -1
         for i, frame in enumerate(frames):
             window.append(frame)
             start = i - self.frames_in + 1
             if len(window) == self.frames_in and start - last_start >= self.step:
                 last_start = start
                 yield start, list(window)
+        start = i - self.frames_in + 1
+        if len(window) == self.frames_in and start > last_start:
+            yield start, list(window)
 
     def heatmaps(self, frames) -> tuple[dict[int, list[np.ndarray]], float]:
         """Run the network over letterboxed frames (full grid); frame index → its probability maps (one per
@@ -160,14 +166,20 @@ class BallDetectorRunner:
         maps: dict[int, list[np.ndarray]] = {}
         seconds = 0.0
         batch: list[tuple[int, list[np.ndarray]]] = []
+        covered = [0]  # frames before this have had every regular window
 
         def flush():
             nonlocal seconds
             probs, dt = self._forward([w for _, w in batch])
             seconds += dt
             for (s, _), p in zip(batch, probs):
+                tail = s % self.step != 0  # the window ending at the last frame: its new frames only
                 for k in range(p.shape[0]):
-                    maps.setdefault(s + self.frames_in - p.shape[0] + k, []).append(p[k])
+                    f = s + self.frames_in - p.shape[0] + k
+                    if not tail or f >= covered[0]:
+                        maps.setdefault(f, []).append(p[k])
+                if not tail:
+                    covered[0] = max(covered[0], s + self.frames_in)
             batch.clear()
 
         for item in self._windows(frames):
@@ -198,10 +210,18 @@ class BallDetectorRunner:
                 if online is not None:
                     online.update(fc.xy, fc.score)
 
+        covered = 0  # frames before this have had every regular window
+
         def add(starts: list[int], probs: np.ndarray, origin=None) -> bool:
+            nonlocal covered
             found = True
             for s, p in zip(starts, probs):
                 first = s + self.frames_in - p.shape[0]
+                skip = 0
+                if s % self.step:  # the tail window (ends at the last frame): its frames not yet searched only
+                    skip = max(covered - first, 0)
+                else:
+                    covered = max(covered, s + self.frames_in)
                 if origin is None:
                     cands = heatmaps_to_candidates(p, lb, self.postprocess)
                 else:
@@ -210,7 +230,8 @@ class BallDetectorRunner:
                     if not found:
                         return False
                 for k, c in enumerate(cands):
-                    pending.setdefault(first + k, []).append(c)
+                    if k >= skip:
+                        pending.setdefault(first + k, []).append(c)
             return found
 
         batch: list[tuple[int, list[np.ndarray]]] = []

@@ -288,8 +288,8 @@ def evaluate_events(cfg: DictConfig) -> dict[str, float]:
     det = load_detector(path, cfg, dm)
     split = str(cfg.get("split") or "test")
     if split == "auto":
-        inferred = dm.source == "folder" and any(s.inferred for s in dm.sources)
-        split = "all" if inferred else "test"
+        every = dm.source == "folder" and all(s.eval_split() == "all" for s in dm.sources)
+        split = "all" if every else "test"  # clips stating their split: the test split, as for a manifest
     scores, table, rows = event_tables(det, dm, f"{det.kind} ({path.name})", split=split,
                                        max_clips=cfg.get("max_clips"), cfg=cfg)
     if "val_f1" in det.meta:

@@ -186,3 +186,18 @@ def test_auto_mask_hides_a_burnt_in_scoreboard_from_the_detector(tmp_path):
     assert len(rects) == 1
     hits, recall = in_panel(Clip(clip.root))
     assert hits == 0 and recall > 0.8
+
+
+@pytest.mark.parametrize("n, batch", [(20, 1), (20, 8), (22, 4), (21, 8)])
+def test_every_frame_is_searched_up_to_the_last(tmp_path, n, batch):
+    """Windows of 3 every 3 frames leave the last (n - 3) % 3 frames out unless one more window ends at the
+    last frame; its frames that earlier windows searched are not counted twice, whatever the batch size."""
+    xy = np.stack([np.linspace(60, 560, n), np.full(n, 180.0)], axis=1)
+    clip = render_clip(tmp_path / f"c{n}_{batch}", xy, still=())
+    result = BallDetectorRunner(YellowNet(), normalize="unit", batch_size=batch).run(clip)
+    assert len(result.candidates) == n
+    assert all(c.count == 1 for c in result.candidates)             # one ball each, none repeated
+    assert np.linalg.norm(result.candidates[-1].xy[0] - xy[-1]) < 2.0
+    crop = BallDetectorRunner(YellowNet(), normalize="unit", batch_size=batch)
+    maps, _ = crop.heatmaps(iter([np.zeros((288, 512, 3), np.uint8)] * n))
+    assert sorted(maps) == list(range(n)) and all(len(v) == 1 for v in maps.values())
