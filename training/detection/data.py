@@ -3,8 +3,11 @@
 * Clips come from a dataset folder with ``manifest.yaml``, a folder of clip folders (a manifest is inferred,
   :mod:`training.datasets`), several of these mixed with weights (``root_weights``), or lists of clips.
   Clips without ``ball.csv`` (not labelled yet) are skipped with a warning.
-* Frames are resized once, aspect-preserving (letterbox), to the network size and cached as ``uint8``
-  arrays on disk, so epochs after the first never decode video again (``cache_dir``).
+* Frames are resized once, aspect-preserving (letterbox), to the network size and stored, one indexed file
+  per clip (:mod:`training.detection.frame_store`, in ``cache_dir``, default ``<root>/.cache``): JPEG for
+  the training split (1/10 of raw ``uint8``), PNG (lossless) for the scored splits, so validation and test
+  see exactly the frames eval.py and inference see. Epochs after the first never decode video again; each
+  window decodes its frames in ``__getitem__`` (in the DataLoader workers), with a small per-process LRU.
 * Targets: a binary disk of ``radius`` px (net resolution) around the ball of each output frame whose
   visibility is in ``visible_flags``; real-valued maps for the hard frames of ``soft_flags`` (e.g. [2]);
   all-zero maps otherwise. Frames without a ``ball.csv`` row (never labelled) and frames whose visibility
@@ -34,30 +37,43 @@ from torch.utils.data import DataLoader, Dataset, WeightedRandomSampler
 from inference.clipio import Clip, FormatError, private_temp_path
 from inference.detection.geometry import Letterbox
 from inference.detection.preprocess import normalize
+from training.detection.frame_store import FrameStore, StoreError, StoreWriter, store_tag
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
 class ClipData:
-    """One clip ready for sampling: cached letterboxed frames and the ball in net pixels."""
+    """One clip ready for sampling: its letterboxed frames (a frame store, decoded on demand) and the ball in
+    net pixels."""
 
     name: str
-    frames: np.ndarray          # (T, H, W, 3) uint8 memmap at network size
+    frames: FrameStore          # (T, H, W, 3) uint8 array-like at net size: frames[s:e] is (k, H, W, 3)
     visibility: np.ndarray      # (T,) int8, -1 where not labelled
     xy_net: np.ndarray          # (T, 2) ball in network pixels (NaN where none)
     xy_px: np.ndarray           # (T, 2) ball in original pixels
     letterbox: Letterbox
 
 
-def _cache_key(clip: Clip, net_size: tuple[int, int]) -> str:
+def _cache_key(clip: Clip, net_size: tuple[int, int], store: str | None = None) -> str:
+    """The clip's folder, its video's mtime, the net size and the store format (``store_tag()``; the
+    empty string gives the key of the raw ``uint8`` caches written before the frame store)."""
     video = clip.video_path
     stamp = f"{clip.root.resolve()}|{video.stat().st_mtime_ns if video.exists() else 0}|{net_size}"
+    if store != "":
+        stamp += f"|{store or store_tag()}"
     return hashlib.sha1(stamp.encode()).hexdigest()[:16]
 
 
-def load_clip(clip: Clip, net_size: tuple[int, int], cache_dir: Path, progress: bool = False) -> ClipData:
-    """Read ball.csv and the letterboxed frames of a clip (building the frame cache on first use)."""
+def load_clip(clip: Clip, net_size: tuple[int, int], cache_dir: Path, progress: bool = False,
+              exact: bool = False) -> ClipData:
+    """Read ball.csv and the letterboxed frames of a clip (building its frame store on first use).
+
+    The store is ``<cache_dir>/<clip>_<key>.npy`` (:mod:`training.detection.frame_store`): JPEG, or with
+    ``exact`` PNG (lossless: the frames are the letterboxed video's, bit for bit). One that is incomplete,
+    damaged in its layout or shorter than the clip is rebuilt (logged). The raw ``uint8`` cache of the same
+    clip written by earlier versions is deleted (logged).
+    """
     if not clip.ball_path.is_file():
         raise FormatError(clip.ball_path, "file not found",
                           fix="label the ball (rally3d label) or remove the clip from the manifest")
@@ -70,31 +86,46 @@ def load_clip(clip: Clip, net_size: tuple[int, int], cache_dir: Path, progress: 
     xy_net = np.full_like(xy_px, np.nan)
     ok = np.isfinite(xy_px).all(axis=1)
     xy_net[ok] = lb.forward(xy_px[ok])
-    cache = Path(cache_dir) / f"{clip.root.name}_{_cache_key(clip, net_size)}.npy"
-    if not cache.is_file():
-        _build_cache(clip, lb, net_size, n, cache, progress)
-    frames = np.load(cache, mmap_mode="r")
-    if len(frames) < n:
-        raise FormatError(clip.video_path, f"the video has {len(frames)} frames but ball.csv/clip.yaml need {n}",
-                          fix="check clip.yaml's n_frames and the labels against the video")
+    cache_dir = Path(cache_dir)
+    old = cache_dir / f"{clip.root.name}_{_cache_key(clip, net_size, store='')}.npy"
+    if old.is_file():
+        log.info("deleting the old raw frame cache %s (%.0f MB): frames are now kept as JPEG (frame store)",
+                 old, old.stat().st_size / 1e6)
+        old.unlink(missing_ok=True)
+    codec = "png" if exact else "jpeg"
+    cache = cache_dir / f"{clip.root.name}_{_cache_key(clip, net_size, store_tag(codec))}.npy"
+    frames = None
+    if cache.is_file():
+        try:
+            frames = FrameStore(cache)
+        except StoreError as e:
+            log.warning("%s: %s; rebuilding it from the video", cache, e)
+        else:
+            if len(frames) < n or frames.shape[1:3] != tuple(net_size):
+                log.warning("%s holds %d frames of %s, the clip needs %d of %s: rebuilding it from the video",
+                            cache, len(frames), frames.shape[1:3], n, tuple(net_size))
+                frames = None
+    if frames is None:
+        _build_cache(clip, lb, net_size, n, cache, progress, codec)
+        frames = FrameStore(cache)
     return ClipData(clip.root.name, frames, dense.visibility, xy_net, xy_px, lb)
 
 
-def _build_cache(clip: Clip, lb: Letterbox, net_size, n: int, path: Path, progress: bool) -> None:
+def _build_cache(clip: Clip, lb: Letterbox, net_size, n: int, path: Path, progress: bool,
+                 codec: str = "jpeg") -> None:
+    """Decode the video once, letterbox every frame and write the frame store (a temporary name, renamed
+    when complete: DDP ranks or two runs may build the same store at once)."""
     from tqdm import tqdm
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = private_temp_path(path)  # DDP ranks or two runs may build the same cache at once
-    out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.uint8, shape=(n, net_size[0], net_size[1], 3))
+    tmp = private_temp_path(path)
     count = 0
     try:
-        with clip.frames(cache_size=0) as src:
+        with StoreWriter(tmp, net_size, codec) as out, clip.frames(cache_size=0) as src:
             for i, frame in enumerate(tqdm(src.iter(0, n), total=n, desc=f"cache {clip.root.name}",
                                            disable=not progress)):
-                out[i] = lb.warp(frame)
+                out.add(lb.warp(frame))
                 count = i + 1
-        out.flush()
-        del out
         if count < n:
             raise FormatError(clip.video_path, f"the video has {count} frames but the clip needs {n}",
                               fix="check clip.yaml's n_frames and the labels against the video")
@@ -313,7 +344,8 @@ class BallDataModule(L.LightningDataModule):
             pairs = self._clips("train")
         if not pairs:
             raise ValueError(f"the {split} split has no labelled clips (with ball.csv) in {hp.root}")
-        clips = [load_clip(c, self.net_size, self._cache_dir(c, k), progress=True) for c, k in pairs]
+        clips = [load_clip(c, self.net_size, self._cache_dir(c, k), progress=True, exact=split != "train")
+                 for c, k in pairs]  # scored splits: lossless frames, as eval.py sees them
         train = split == "train"
         spec = WindowSpec(hp.frames_in, hp.frames_out, hp.train_step if train else hp.frames_out, hp.radius,
                           tuple(hp.visible_flags), tuple(hp.soft_flags) if train else (),
@@ -330,7 +362,7 @@ class BallDataModule(L.LightningDataModule):
         for split in ("train", "val"):
             for c, k in self._clips(split):
                 if c.ball_path.is_file():
-                    load_clip(c, self.net_size, self._cache_dir(c, k), progress=True)
+                    load_clip(c, self.net_size, self._cache_dir(c, k), progress=True, exact=split != "train")
 
     def setup(self, stage: str | None = None) -> None:
         wanted = {"fit": ("train", "val"), "validate": ("val",), "test": ("test",), None: ("train", "val")}
