@@ -26,7 +26,7 @@ import torch
 from torch.utils.data import DistributedSampler, Sampler
 
 
-GLOBAL_METRICS = r"(val|test)/(precision|recall|f1|f1_best|accuracy|acc|ap|rmse_px|tp|fp1|fp2|fn|tn)"
+GLOBAL_METRICS = r"(val|test)/(precision|recall|f1|f1_best|f1_tracker|f1_max_score|f1_blob|accuracy|acc|ap|rmse_px|tp|fp1|fp2|fn|tn)"
 """The epoch metrics the modules compute from :func:`all_reduce_sum` counts (detectors'
 ``training.detection.module``, hit events' ``log_event_metrics``) and log without ``sync_dist``."""
 

@@ -86,7 +86,7 @@ def test_optimized_metric_is_the_best_epoch_and_hparams_reach_the_logger(tiny, t
     assert hp["model"]["net"]["name"] == "wasb" and hp["data"]["root"] == str(tiny)
     assert hp["optimized_metric"] == "val/f1_best" and hp["seed"] == 1234
     assert hp["model/params/non_trainable"] > 0                     # the 39 frozen unused tensors
-    assert hp["tau_px"] == 10.0 and hp["net_size"] == [64, 112]     # the module's and data module's own
+    assert hp["tau_px"] == 4.0 and hp["net_size"] == [64, 112]      # the module's and data module's own
 
 
 def test_val_f1_best_is_the_maximum_not_the_last_epoch():

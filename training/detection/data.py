@@ -163,15 +163,18 @@ class BallWindows(Dataset):
     the crop offset (2,) in net pixels, the clip index and the first frame.
     """
 
-    def __init__(self, clips: list[ClipData], spec: WindowSpec, seed: int = 0):
+    def __init__(self, clips: list[ClipData], spec: WindowSpec, seed: int = 0, fps: list[float] | None = None,
+                 max_frames: int | None = None):
         if spec.frames_out > spec.frames_in:
             raise ValueError("frames_out cannot exceed frames_in")
         if spec.crop is not None and any(c % 8 for c in spec.crop):
             raise ValueError(f"crop {spec.crop} must be multiples of 8")
         self.clips, self.spec, self.seed = clips, spec, seed
-        self.index = [(c, s) for c, cd in enumerate(clips)
-                      for s in range(0, len(cd.visibility) - spec.frames_in + 1, spec.step)
+        self.fps = list(fps) if fps is not None else [30.0] * len(clips)
+        self.index = [(c, s) for c, cd in enumerate(clips) for s in _starts(len(cd.visibility), spec)
                       if _counts(cd.visibility[s + spec.frames_in - spec.frames_out: s + spec.frames_in], spec)]
+        if max_frames:
+            self.index = _stretches(self.index, int(max_frames), seed)
         if not self.index:
             raise ValueError("no labelled windows: every clip is shorter than frames_in or has no ball.csv rows "
                              f"(other than visibility {list(spec.ignore_flags)}, which is left out)")
@@ -217,8 +220,43 @@ class BallWindows(Dataset):
         meta = {"visibility": torch.as_tensor(vis), "labelled": torch.as_tensor(labelled), "xy_px": torch.as_tensor(cd.xy_px[out], dtype=torch.float32),
                 "offset": torch.tensor([x0, y0], dtype=torch.float32),
                 "lb_scale": torch.tensor(cd.letterbox.scale, dtype=torch.float32),
-                "lb_pad": torch.tensor(cd.letterbox.offset, dtype=torch.float32), "clip": c, "start": s}
+                "lb_pad": torch.tensor(cd.letterbox.offset, dtype=torch.float32), "clip": c, "start": s,
+                "skip": _tail_skip(s, len(cd.visibility), spec),
+                "fps": torch.tensor(self.fps[c], dtype=torch.float64),
+                "size": torch.tensor([cd.letterbox.src_w, cd.letterbox.src_h], dtype=torch.float64)}
         return torch.from_numpy(x), torch.from_numpy(heat), meta
+
+
+def _starts(n: int, spec: WindowSpec) -> list[int]:
+    """Window starts over ``n`` frames every ``step``, plus one window ending at the last frame when the
+    grid leaves the last frames out (as inference runs: every frame is searched)."""
+    starts = list(range(0, n - spec.frames_in + 1, spec.step))
+    if starts and starts[-1] < n - spec.frames_in:
+        starts.append(n - spec.frames_in)
+    return starts
+
+
+def _tail_skip(s: int, n: int, spec: WindowSpec) -> int:
+    """How many leading output frames of the window at ``s`` an earlier window already covered (only the
+    extra window ending at the last frame has any): left out of the clip-level validation."""
+    if s % spec.step == 0:
+        return 0
+    covered = (n - spec.frames_in) // spec.step * spec.step + spec.frames_in
+    return max(covered - (s + spec.frames_in - spec.frames_out), 0)
+
+
+def _stretches(index: list[tuple[int, int]], max_frames: int, seed: int) -> list[tuple[int, int]]:
+    """Per clip, only the windows starting inside one fixed stretch of ``max_frames`` frames (its place
+    seeded per clip, the same every epoch): a cheaper validation that still tracks whole stretches."""
+    by_clip: dict[int, list[int]] = {}
+    for c, s in index:
+        by_clip.setdefault(c, []).append(s)
+    out = []
+    for c, starts in by_clip.items():
+        lo, hi = min(starts), max(starts)
+        first = lo + int(np.random.default_rng([seed, c]).integers(0, max(hi - lo - max_frames, 0) + 1))
+        out += [(c, s) for s in starts if first <= s < first + max_frames]
+    return out
 
 
 def _counts(vis: np.ndarray, spec: WindowSpec) -> bool:
@@ -284,6 +322,7 @@ class BallDataModule(L.LightningDataModule):
         net_size: (H, W) network input size; crop: (h, w) training crops or None for full frames.
         ignore_flags: visibilities left out of the loss and of validation (default [3]: occluded).
         cache_dir: where resized frames are cached (default ``<root>/.cache`` of each clip's root).
+        val_max_frames: validate on one fixed stretch of this many frames per clip (None: whole clips).
     """
 
     def __init__(self, root: str | list[str] | None = None, train_clips: list[str] | None = None,
@@ -293,7 +332,8 @@ class BallDataModule(L.LightningDataModule):
                  visible_flags: tuple[int, ...] = (1, 2), soft_flags: tuple[int, ...] = (),
                  ignore_flags: tuple[int, ...] = (3,), normalize: str = "imagenet", augment: bool = True,
                  train_step: int = 1, batch_size: int = 8, num_workers: int = 0, cache_dir: str | None = None,
-                 seed: int = 1234, root_weights: list[float] | None = None, split_seed: int | None = None):
+                 seed: int = 1234, root_weights: list[float] | None = None, split_seed: int | None = None,
+                 val_max_frames: int | None = None):
         super().__init__()
         self.save_hyperparameters()  # logged with the module's (hparams.yaml)
         self.net_size = tuple(net_size)
@@ -351,7 +391,8 @@ class BallDataModule(L.LightningDataModule):
                           tuple(hp.visible_flags), tuple(hp.soft_flags) if train else (),
                           tuple(hp.ignore_flags), tuple(hp.crop) if (train and hp.crop) else None,
                           hp.ball_crop_prob, hp.normalize, bool(hp.augment and train))
-        windows = BallWindows(clips, spec, hp.seed)
+        windows = BallWindows(clips, spec, hp.seed, fps=[c.info.fps for c, _ in pairs],
+                              max_frames=hp.val_max_frames if split == "val" else None)
         self.window_source[split] = np.array([max(pairs[c][1], 0) for c, _ in windows.index], dtype=np.int64)
         return windows
 

@@ -1,9 +1,12 @@
 """The LightningModule that trains a ball detector (TrackNetV2, MonoTrack or WASB) on heatmaps.
 
-Validation decodes each output heatmap like inference does (threshold, connected components, the
-best-scoring blob), maps it back to original-frame pixels and counts TP/FP1/FP2/FN/TN at ``tau_px``
-(original pixels), leaving out unlabelled frames and the visibilities of ``ignore_flags`` as ``eval.py``
-does; ``val/f1`` chooses the best checkpoint. The loss counts only the labelled frames of a window.
+Validation scores what ``eval.py`` scores (:mod:`.clip_scores`): each output heatmap becomes ball
+candidates as inference makes them, the validation clips are rebuilt from their windows and run through
+the tracker and the max-score baseline, and TP/FP1/FP2/FN/TN are counted at ``tau_px`` in original-frame
+pixels, leaving out unlabelled frames and the visibilities of ``ignore_flags``. ``val/f1`` (the best
+checkpoint, ``val_post``: ``tracker`` by default) is that F1; ``val/f1_tracker``, ``val/f1_max_score`` and
+``val/f1_blob`` (each frame's best blob alone, the earlier measure) are logged beside it. The loss counts
+only the labelled frames of a window.
 Every checkpoint stores the input description (``inference.models.checkpoint.META_KEY``).
 
 Example (what Hydra instantiates from conf/model/*.yaml):
@@ -20,8 +23,9 @@ import torch
 from torch import nn
 
 from inference.detection.metrics import DetectionCounts, DetectionReport, Outcome, average_precision, classify_frames
-from inference.detection.postprocess import heatmap_to_candidates
+from inference.detection.postprocess import PostprocessConfig, heatmap_to_candidates
 from inference.models.checkpoint import META_KEY, DetectorInput, architecture_of, load_weights
+from training.detection.clip_scores import CANDIDATE_COLUMNS, FRAME_COLUMNS, POSTS, clip_reports, window_rows
 from training.distributed import all_gather_concat, all_reduce_sum, world
 from training.finetune import freeze as freeze_layers
 from training.finetune import freeze_unused, hold_frozen_norms, trainable
@@ -38,7 +42,9 @@ class BallDetector(L.LightningModule):
         trust_checkpoint: allow ``pretrained`` to hold pickled objects (runs their code).
         freeze: prefixes of parameter names that do not learn (e.g. WASB's stem ``[conv1, bn1, conv2, bn2,
             layer1]``); their batch-norm statistics stay as loaded.
-        tau_px: validation distance threshold in original-frame pixels.
+        tau_px: validation distance threshold in original-frame pixels (4: eval.py's first table).
+        val_post: what ``val/f1`` and ``test/f1`` score: ``tracker`` or ``max-score`` over whole clips (as
+            eval.py), or ``blob`` (each frame's best blob, no tracker).
         ignore_flags: ground-truth visibilities left out of validation (default [3]: occluded, as eval.py).
         threshold: heatmap probability threshold of the blob detection.
         channels_last: keep weights and inputs in NHWC memory format (about ×1.4 faster training steps
@@ -47,9 +53,11 @@ class BallDetector(L.LightningModule):
     """
 
     def __init__(self, net: nn.Module, loss: nn.Module, optimizer: Callable, scheduler: Callable | None = None,
-                 pretrained: str | None = None, tau_px: float = 10.0, threshold: float = 0.5,
+                 pretrained: str | None = None, tau_px: float = 4.0, threshold: float = 0.5,
                  channels_last: bool = False, compile: bool = False, trust_checkpoint: bool = False,
-                 freeze: list[str] | None = None, ignore_flags: list[int] | None = (3,)):
+                 freeze: list[str] | None = None, ignore_flags: list[int] | None = (3,), val_post: str = "tracker"):
+        if val_post not in (*POSTS, "blob"):
+            raise ValueError(f"val_post must be one of {(*POSTS, 'blob')}, got {val_post!r}")
         super().__init__()
         # factories are kept as attributes, not hyperparameters: checkpoints stay loadable with weights_only
         # (the loggers get the whole composed config from training.run.log_hyperparameters)
@@ -69,6 +77,7 @@ class BallDetector(L.LightningModule):
         # kept out of the module tree so state_dict names stay those of the plain network
         self._forward_fn = {"net": torch.compile(self.net) if compile else self.net}
         self.outputs: dict[str, list[tuple]] = {"val": [], "test": []}
+        self.clip_rows: dict[str, list[tuple]] = {"val": [], "test": []}  # (candidate rows, frame rows) per batch
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(B, 3·F_in, H, W) → (B, F_out, H, W) logits."""
@@ -133,6 +142,9 @@ class BallDetector(L.LightningModule):
         offset = meta["offset"].numpy()
         vis = meta["visibility"].numpy()
         gt = meta["xy_px"].numpy()
+        if "fps" in meta and "size" in meta:  # the clip-level score (eval.py's post-processing)
+            config = PostprocessConfig(threshold=float(self.hparams.threshold))
+            self.clip_rows[split].append(window_rows(probs, meta, int(getattr(self.net, "frames_in", Fo)), config))
         pred_vis = np.zeros((B, Fo), bool)
         pred_xy = np.full((B, Fo, 2), np.nan)
         score = np.zeros((B, Fo))
@@ -168,14 +180,33 @@ class BallDetector(L.LightningModule):
         ap = average_precision(pairs[:, 0], pairs[:, 1] > 0, counts.tp + counts.fn)
         return DetectionReport(counts, rmse, ap, tau)
 
+    def clip_reports(self, split: str) -> dict[str, DetectionReport]:
+        """Per post-processing, the report over the whole clips of ``split`` seen since the last call, over
+        every process (each rank's rows gathered, every rank scores them all: the same figures)."""
+        parts = self.clip_rows[split]
+        self.clip_rows[split] = []
+        cands = np.concatenate([p[0] for p in parts]) if parts else np.zeros((0, len(CANDIDATE_COLUMNS)))
+        frames = np.concatenate([p[1] for p in parts]) if parts else np.zeros((0, len(FRAME_COLUMNS)))
+        cands, frames = all_gather_concat(cands), all_gather_concat(frames)
+        if not len(frames):  # a data module whose windows carry no fps/size: the blob measure only
+            return {}
+        return clip_reports(cands, frames, float(self.hparams.tau_px), tuple(self.hparams.ignore_flags or ()))
+
     def _log_counts(self, split: str) -> None:
         if not self.outputs[split] and world()[1] == 1:
             return
-        values = self.report(split).as_dict()
+        blob = self.report(split)
+        reports = {"blob": blob}
+        if self.clip_rows[split] or world()[1] > 1:
+            reports.update(self.clip_reports(split))
+        post = self.hparams.get("val_post", "tracker")
+        values = reports.get(post, blob).as_dict()
         # already global (equal on every rank): logged as they are, no second reduction
         for name in ("precision", "recall", "f1", "accuracy", "ap", "rmse_px", "tp", "fp1", "fp2", "fn", "tn"):
             value = float(values[name])
             self.log(f"{split}/{name}", value if value == value else 0.0, prog_bar=name == "f1")
+        for name, report in reports.items():
+            self.log(f"{split}/f1_{name.replace('-', '_')}", float(report.f1))
         if split == "val" and not self.trainer.sanity_checking:
             self.best["val/f1"] = max(self.best.get("val/f1", -1.0), float(values["f1"]))
             self.log("val/f1_best", self.best["val/f1"])
