@@ -191,7 +191,7 @@ class BallWindows(Dataset):
         c, s = self.index[i]
         cd = self.clips[c]
         rng = np.random.default_rng([self.seed, self.epoch, i])
-        imgs = np.asarray(cd.frames[s:s + spec.frames_in], dtype=np.float32)         # (F, H, W, 3)
+        imgs = np.asarray(cd.frames[s:s + spec.frames_in])                          # (F, H, W, 3) uint8
         out = slice(s + spec.frames_in - spec.frames_out, s + spec.frames_in)
         vis = cd.visibility[out].astype(np.int64)
         labelled = (vis >= 0) & ~np.isin(vis, spec.ignore_flags)
@@ -209,6 +209,7 @@ class BallWindows(Dataset):
         if spec.augment and rng.random() < spec.flip_prob:
             imgs = imgs[:, :, ::-1]
             centres = np.stack([imgs.shape[2] - 1 - centres[:, 0], centres[:, 1]], axis=1)
+        imgs = imgs.astype(np.float32)  # after the crop: only the pixels used are converted
         if spec.augment and rng.random() < spec.jitter_prob:
             gain, bias = rng.uniform(0.75, 1.25), rng.uniform(-20, 20)
             imgs = np.clip(imgs * gain + bias, 0, 255)
@@ -277,7 +278,8 @@ def _crop_origin(centres, hw, crop, p_ball, rng) -> tuple[int, int]:
 
 
 def _scale_crop(imgs: np.ndarray, centres: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
-    """Zoom in by up to ×1.125 about a random point (the published scale augmentation)."""
+    """Zoom in by up to ×1.125 about a random point (the published scale augmentation); ``imgs`` ``(F, H, W, 3)``
+    of any dtype OpenCV warps (uint8 here)."""
     import cv2
 
     F_, H, W, _ = imgs.shape

@@ -39,6 +39,7 @@ import struct
 import threading
 import zlib
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -47,6 +48,8 @@ import numpy as np
 
 from inference.clipio import FormatError
 
+DECODE_THREADS = max(1, int(os.environ.get("RALLY3D_FRAME_THREADS", 3)))
+"""Threads per process that decode a window's frames side by side (``RALLY3D_FRAME_THREADS`` changes it)."""
 MAGIC = b"R3DJPEG\x00"
 VERSION = 1
 QUALITY = 95
@@ -326,8 +329,12 @@ class FrameStore:
                 raise TypeError("frame store indices must be integers, slices or 1-D integer arrays, "
                                 f"got {key!r}")
         out = np.empty((len(idx), *self.shape[1:]), np.uint8)
-        for k, i in enumerate(idx):
-            out[k] = self.frame(int(i))
+        if len(idx) > 1:  # a window's frames decode side by side (OpenCV's decoders release the GIL)
+            for k, frame in enumerate(_decoder_pool().map(self.frame, [int(i) for i in idx])):
+                out[k] = frame
+        else:
+            for k, i in enumerate(idx):
+                out[k] = self.frame(int(i))
         return out
 
     def __iter__(self):
@@ -342,6 +349,18 @@ class FrameStore:
         return (f"FrameStore({str(self.path)!r}, {len(self)} frames {self.shape[1]}×{self.shape[2]}, "
                 f"{self.codec}{f' q{self.quality} {self.subsampling}' if self.codec == 'jpeg' else ''}, "
                 f"{self.file_bytes / 1e6:.1f} MB)")
+
+
+_POOL: dict[int, ThreadPoolExecutor] = {}
+
+
+def _decoder_pool() -> ThreadPoolExecutor:
+    """This process's decoding threads (:data:`DECODE_THREADS`; made after a fork, never inherited)."""
+    pid = os.getpid()
+    if pid not in _POOL:
+        _POOL.clear()
+        _POOL[pid] = ThreadPoolExecutor(DECODE_THREADS, thread_name_prefix="frame-store")
+    return _POOL[pid]
 
 
 def write_store(path: str | Path, frames: Iterable[np.ndarray], size: tuple[int, int], codec: str = "jpeg",
