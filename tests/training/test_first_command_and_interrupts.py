@@ -74,7 +74,8 @@ def _step_of(ckpt: Path) -> int:
 def _stop_after(cmd: list[str], log: Path, steps: int, sig: int) -> subprocess.CompletedProcess:
     """Run ``cmd`` (output to ``log``), send ``sig`` once ProgressLog has logged ``steps`` steps."""
     with log.open("w") as f:
-        proc = subprocess.Popen(cmd, cwd=ROOT, env=_env(), stdout=f, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=_env(), stdout=f, stderr=subprocess.STDOUT,  # Ctrl-C reaches it
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # even in `make test &`
         try:
             wait_until(lambda: proc.poll() is not None or re.search(rf"step {steps}/", log.read_text()),
                        what=f"step {steps} in {log}")

@@ -51,8 +51,11 @@ def test_ctrl_c_during_generation_is_resumed_never_trained_on(tmp_path, monkeypa
     spec = {"sport": "padel", "clips": 100, "seed": 3, "max_frames": 12, "config": TINY}
     log = tmp_path / "generate.log"
     with log.open("w") as f:
+        # Ctrl-C must reach the child even when this test runs in the background (`make test &`: a
+        # non-interactive shell starts background jobs with SIGINT ignored, and children inherit that)
         proc = subprocess.Popen([sys.executable, "-c", GENERATE, str(root), json.dumps(spec)], cwd=ROOT, env=_env(),
-                                stdout=f, stderr=subprocess.STDOUT)
+                                stdout=f, stderr=subprocess.STDOUT,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         try:
             wait_until(lambda: proc.poll() is not None or (root / "clip_0000" / "clip.yaml").is_file(),
                        what=f"the first clip folder under {root}")
