@@ -81,6 +81,16 @@ class DetectionResult:
         return self.n_frames / self.seconds_total if self.seconds_total else float("nan")
 
 
+def window_starts(n: int, frames_in: int, step: int) -> list[tuple[int, int]]:
+    """``(start, first_new)`` of the detector windows over ``n`` frames, as the runner places them: every
+    ``step`` frames (``first_new`` 0), plus one window ending at the last frame when those leave the last
+    frames out, whose frames before ``first_new`` were searched by an earlier window."""
+    starts = [(s, 0) for s in range(0, n - frames_in + 1, step)]
+    if starts and starts[-1][0] < n - frames_in:
+        starts.append((n - frames_in, starts[-1][0] + frames_in))
+    return starts
+
+
 @dataclass
 class BallDetectorRunner:
     """A detector network with its pre/post-processing.
@@ -144,9 +154,10 @@ class BallDetectorRunner:
         return probs, time.perf_counter() - t0
 
     def _windows(self, frames):
-        """``(start, frames)`` of each detector window over the frame stream; when the stream's last frames
-        fall after the last window, one more window ends at the last frame (its earlier frames repeat:
-        :func:`tail_skip` says how many of its outputs are new), so every frame is searched."""
+        """``(start, frames, first_new)`` of each detector window over the frame stream: windows every ``step``
+        frames (``first_new`` 0), and when the stream's last frames fall after the last of them, one more window
+        ending at the last frame whose outputs before ``first_new`` repeat frames already searched (so every
+        frame is searched once): :func:`window_starts` on a stream of unknown length."""
         window: deque = deque(maxlen=self.frames_in)
         last_start = -self.step
         i = -1
@@ -155,10 +166,10 @@ class BallDetectorRunner:
             start = i - self.frames_in + 1
             if len(window) == self.frames_in and start - last_start >= self.step:
                 last_start = start
-                yield start, list(window)
+                yield start, list(window), 0
         start = i - self.frames_in + 1
         if len(window) == self.frames_in and start > last_start:
-            yield start, list(window)
+            yield start, list(window), last_start + self.frames_in
 
     def heatmaps(self, frames) -> tuple[dict[int, list[np.ndarray]], float]:
         """Run the network over letterboxed frames (full grid); frame index → its probability maps (one per
@@ -166,20 +177,16 @@ class BallDetectorRunner:
         maps: dict[int, list[np.ndarray]] = {}
         seconds = 0.0
         batch: list[tuple[int, list[np.ndarray]]] = []
-        covered = [0]  # frames before this have had every regular window
 
         def flush():
             nonlocal seconds
-            probs, dt = self._forward([w for _, w in batch])
+            probs, dt = self._forward([w for _, w, _ in batch])
             seconds += dt
-            for (s, _), p in zip(batch, probs):
-                tail = s % self.step != 0  # the window ending at the last frame: its new frames only
+            for (s, _, first_new), p in zip(batch, probs):
                 for k in range(p.shape[0]):
                     f = s + self.frames_in - p.shape[0] + k
-                    if not tail or f >= covered[0]:
+                    if f >= first_new:
                         maps.setdefault(f, []).append(p[k])
-                if not tail:
-                    covered[0] = max(covered[0], s + self.frames_in)
             batch.clear()
 
         for item in self._windows(frames):
@@ -210,18 +217,11 @@ class BallDetectorRunner:
                 if online is not None:
                     online.update(fc.xy, fc.score)
 
-        covered = 0  # frames before this have had every regular window
-
-        def add(starts: list[int], probs: np.ndarray, origin=None) -> bool:
-            nonlocal covered
+        def add(starts: list[tuple[int, int]], probs: np.ndarray, origin=None) -> bool:
             found = True
-            for s, p in zip(starts, probs):
+            for (s, first_new), p in zip(starts, probs):
                 first = s + self.frames_in - p.shape[0]
-                skip = 0
-                if s % self.step:  # the tail window (ends at the last frame): its frames not yet searched only
-                    skip = max(covered - first, 0)
-                else:
-                    covered = max(covered, s + self.frames_in)
+                skip = max(first_new - first, 0)  # outputs of frames an earlier window searched
                 if origin is None:
                     cands = heatmaps_to_candidates(p, lb, self.postprocess)
                 else:
@@ -234,14 +234,14 @@ class BallDetectorRunner:
                         pending.setdefault(first + k, []).append(c)
             return found
 
-        batch: list[tuple[int, list[np.ndarray]]] = []
-        for start, window in self._windows(frames):
+        batch: list[tuple[int, list[np.ndarray], int]] = []
+        for start, window, first_new in self._windows(frames):
             if online is None:   # full frames, batched
-                batch.append((start, window))
+                batch.append((start, window, first_new))
                 if len(batch) == self.batch_size:
-                    probs, dt = self._forward([w for _, w in batch])
+                    probs, dt = self._forward([w for _, w, _ in batch])
                     seconds += dt
-                    add([s for s, _ in batch], probs)
+                    add([(s, n) for s, _, n in batch], probs)
                     counts["full"] += len(batch)
                     finish(batch[-1][0] + self.step)
                     batch.clear()
@@ -255,7 +255,7 @@ class BallDetectorRunner:
                 probs, dt = self._forward([[f[y0:y0 + h, x0:x0 + w] for f in window]])
                 seconds += dt
                 counts["crop"] += 1
-                if add([start], probs, origin):
+                if add([(start, first_new)], probs, origin):
                     finish(start + self.step)
                     continue
                 counts["crop_rerun"] += 1
@@ -263,12 +263,12 @@ class BallDetectorRunner:
             seconds += dt
             counts["full"] += 1
             last_full = start
-            add([start], probs)
+            add([(start, first_new)], probs)
             finish(start + self.step)
         if batch:
-            probs, dt = self._forward([w for _, w in batch])
+            probs, dt = self._forward([w for _, w, _ in batch])
             seconds += dt
-            add([s for s, _ in batch], probs)
+            add([(s, n) for s, _, n in batch], probs)
             counts["full"] += len(batch)
         finish(max(pending, default=-1) + 1)
         return done, seconds, counts

@@ -28,8 +28,8 @@ FRAME_COLUMNS = ("clip", "frame", "visibility", "gt_x", "gt_y", "fps", "width", 
 POSTS = ("tracker", "max-score")
 
 
-def window_rows(probs: np.ndarray, meta: dict, frames_in: int,
-                config: PostprocessConfig = PostprocessConfig()) -> tuple[np.ndarray, np.ndarray]:
+def window_rows(probs: np.ndarray, meta: dict, frames_in: int, config: PostprocessConfig = PostprocessConfig(),
+                candidates: list[list[FrameCandidates]] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Candidates and truth of a batch of windows as rows.
 
     Args:
@@ -39,6 +39,8 @@ def window_rows(probs: np.ndarray, meta: dict, frames_in: int,
             ``offset``, ``lb_scale``, ``lb_pad``, ``visibility``, ``xy_px``, ``fps``, ``size`` (and ``skip``:
             leading output frames to leave out, those an earlier window covered).
         frames_in: frames per window (the output frames are the last ``F_out``).
+        candidates: the maps' blobs in heatmap pixels (``B`` lists of ``F_out``) when the caller already found
+            them with ``config``; else found here.
 
     Returns:
         ``(K, 6)`` candidate rows (:data:`CANDIDATE_COLUMNS`, original-frame pixels, those in the letterbox
@@ -58,8 +60,7 @@ def window_rows(probs: np.ndarray, meta: dict, frames_in: int,
         for f in range(skip, Fo):
             frame = first + f
             frames.append([clip, frame, vis[b, f], gt[b, f, 0], gt[b, f, 1], fps[b], size[b, 0], size[b, 1]])
-            c = heatmap_to_candidates(probs[b, f], config.threshold, config.use_weights, config.min_area,
-                                      config.max_candidates, config.connectivity)
+            c = candidates[b][f] if candidates is not None else blobs(probs[b, f], config)
             if not c.count:
                 continue
             xy = (c.xy + offset[b] - pad[b]) / scale[b]
@@ -68,6 +69,12 @@ def window_rows(probs: np.ndarray, meta: dict, frames_in: int,
                 cands.append([clip, frame, x, y, s, a])
     return (np.asarray(cands, np.float64).reshape(-1, len(CANDIDATE_COLUMNS)),
             np.asarray(frames, np.float64).reshape(-1, len(FRAME_COLUMNS)))
+
+
+def blobs(heatmap: np.ndarray, config: PostprocessConfig = PostprocessConfig()) -> FrameCandidates:
+    """The blobs of one probability map ``(h, w)`` (heatmap pixels, best first) as inference finds them."""
+    return heatmap_to_candidates(heatmap, config.threshold, config.use_weights, config.min_area,
+                                 config.max_candidates, config.connectivity)
 
 
 def _clip_sequence(cands: np.ndarray, frames: np.ndarray):
@@ -108,4 +115,4 @@ def clip_reports(cands: np.ndarray, frames: np.ndarray, tau_px: float = 4.0, ign
     return out
 
 
-__all__ = ["CANDIDATE_COLUMNS", "FRAME_COLUMNS", "POSTS", "clip_reports", "window_rows"]
+__all__ = ["CANDIDATE_COLUMNS", "FRAME_COLUMNS", "POSTS", "blobs", "clip_reports", "window_rows"]

@@ -35,6 +35,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset, WeightedRandomSampler
 
 from inference.clipio import Clip, FormatError, private_temp_path
+from inference.detection.detect import window_starts
 from inference.detection.geometry import Letterbox
 from inference.detection.preprocess import normalize
 from training.detection.frame_store import FrameStore, StoreError, StoreWriter, store_tag
@@ -171,8 +172,11 @@ class BallWindows(Dataset):
             raise ValueError(f"crop {spec.crop} must be multiples of 8")
         self.clips, self.spec, self.seed = clips, spec, seed
         self.fps = list(fps) if fps is not None else [30.0] * len(clips)
-        self.index = [(c, s) for c, cd in enumerate(clips) for s in _starts(len(cd.visibility), spec)
-                      if _counts(cd.visibility[s + spec.frames_in - spec.frames_out: s + spec.frames_in], spec)]
+        windows = {(c, s): first_new for c, cd in enumerate(clips)
+                   for s, first_new in window_starts(len(cd.visibility), spec.frames_in, spec.step)}
+        self.index = [(c, s) for c, s in windows
+                      if _counts(self.clips[c].visibility[s + spec.frames_in - spec.frames_out: s + spec.frames_in], spec)]
+        self.first_new = {key: f for key, f in windows.items() if f}  # the windows ending at a clip's last frame
         if max_frames:
             self.index = _stretches(self.index, int(max_frames), seed)
         if not self.index:
@@ -222,28 +226,10 @@ class BallWindows(Dataset):
                 "offset": torch.tensor([x0, y0], dtype=torch.float32),
                 "lb_scale": torch.tensor(cd.letterbox.scale, dtype=torch.float32),
                 "lb_pad": torch.tensor(cd.letterbox.offset, dtype=torch.float32), "clip": c, "start": s,
-                "skip": _tail_skip(s, len(cd.visibility), spec),
+                "skip": max(self.first_new.get((c, s), 0) - (s + spec.frames_in - spec.frames_out), 0),
                 "fps": torch.tensor(self.fps[c], dtype=torch.float64),
                 "size": torch.tensor([cd.letterbox.src_w, cd.letterbox.src_h], dtype=torch.float64)}
         return torch.from_numpy(x), torch.from_numpy(heat), meta
-
-
-def _starts(n: int, spec: WindowSpec) -> list[int]:
-    """Window starts over ``n`` frames every ``step``, plus one window ending at the last frame when the
-    grid leaves the last frames out (as inference runs: every frame is searched)."""
-    starts = list(range(0, n - spec.frames_in + 1, spec.step))
-    if starts and starts[-1] < n - spec.frames_in:
-        starts.append(n - spec.frames_in)
-    return starts
-
-
-def _tail_skip(s: int, n: int, spec: WindowSpec) -> int:
-    """How many leading output frames of the window at ``s`` an earlier window already covered (only the
-    extra window ending at the last frame has any): left out of the clip-level validation."""
-    if s % spec.step == 0:
-        return 0
-    covered = (n - spec.frames_in) // spec.step * spec.step + spec.frames_in
-    return max(covered - (s + spec.frames_in - spec.frames_out), 0)
 
 
 def _stretches(index: list[tuple[int, int]], max_frames: int, seed: int) -> list[tuple[int, int]]:

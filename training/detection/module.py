@@ -23,9 +23,9 @@ import torch
 from torch import nn
 
 from inference.detection.metrics import DetectionCounts, DetectionReport, Outcome, average_precision, classify_frames
-from inference.detection.postprocess import PostprocessConfig, heatmap_to_candidates
+from inference.detection.postprocess import PostprocessConfig
 from inference.models.checkpoint import META_KEY, DetectorInput, architecture_of, load_weights
-from training.detection.clip_scores import CANDIDATE_COLUMNS, FRAME_COLUMNS, POSTS, clip_reports, window_rows
+from training.detection.clip_scores import CANDIDATE_COLUMNS, FRAME_COLUMNS, POSTS, blobs, clip_reports, window_rows
 from training.distributed import all_gather_concat, all_reduce_sum, world
 from training.finetune import freeze as freeze_layers
 from training.finetune import freeze_unused, hold_frozen_norms, trainable
@@ -142,15 +142,17 @@ class BallDetector(L.LightningModule):
         offset = meta["offset"].numpy()
         vis = meta["visibility"].numpy()
         gt = meta["xy_px"].numpy()
+        config = PostprocessConfig(threshold=float(self.hparams.threshold))
+        cands = [[blobs(probs[b, f], config) for f in range(Fo)] for b in range(B)]   # found once, used twice
         if "fps" in meta and "size" in meta:  # the clip-level score (eval.py's post-processing)
-            config = PostprocessConfig(threshold=float(self.hparams.threshold))
-            self.clip_rows[split].append(window_rows(probs, meta, int(getattr(self.net, "frames_in", Fo)), config))
+            frames_in = int(getattr(self.net, "frames_in", Fo))
+            self.clip_rows[split].append(window_rows(probs, meta, frames_in, config, candidates=cands))
         pred_vis = np.zeros((B, Fo), bool)
         pred_xy = np.full((B, Fo, 2), np.nan)
         score = np.zeros((B, Fo))
         for b in range(B):
             for f in range(Fo):
-                cand = heatmap_to_candidates(probs[b, f], threshold=self.hparams.threshold)
+                cand = cands[b][f]
                 if len(cand.score):
                     k = int(np.argmax(cand.score))
                     pred_vis[b, f] = True
