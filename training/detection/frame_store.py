@@ -287,9 +287,6 @@ class FrameStore:
         """The size of the file (the encoded frames and the index)."""
         return _NPY_HEADER_BYTES + len(self._body)
 
-    def encoded_size(self, index: int) -> int:
-        return int(self._offsets[index + 1] - self._offsets[index])
-
     def frame(self, index: int) -> np.ndarray:
         """Frame ``index`` (negative counts from the end), RGB ``uint8 (H, W, 3)``, read-only."""
         n = len(self)
