@@ -608,7 +608,8 @@ def court_view_problems(camera: Camera, court: Court) -> list[str]:
         problems.append(f"its focal length is {f:.3g} px, which no lens gives on {w}×{h} frames "
                         f"(expected {0.1 * max(w, h):.0f}–{50 * max(w, h):.0f} px)")
     if camera.centre[2] <= 0:
-        problems.append(f"it stands {camera.centre[2]:.2f} m high (under the floor)")
+        problems.append(f"it stands {camera.centre[2]:.2f} m high (under the floor: clicked points that are "
+                        "mirrored — left and right, or near and far, swapped — put the camera there)")
     xs = np.linspace(0, court.size[0], max(2, int(np.ceil(court.size[0])) + 1))
     ys = np.linspace(0, court.size[1], max(2, int(np.ceil(court.size[1])) + 1))
     floor = np.array([(x, y, 0.0) for x in xs for y in ys])

@@ -306,8 +306,13 @@ def _table_readers(clip, n_frames: int | None, court, labels: Sequence[str] | No
     points = court.point_names if court is not None else None
 
     def camera(gt: bool = False):
+        path = clip.root / ("gt" if gt else "") / "camera.yaml"
         cam = clip.read_camera(gt=gt)
-        clip.check_camera(cam, clip.root / ("gt" if gt else "") / "camera.yaml")
+        clip.check_camera(cam, path)
+        if court is not None:  # a camera that cannot see the court (focal ~0 px, under the floor, looking away)
+            from inference.calibration import require_court_view
+
+            require_court_view(cam, court, path)
         return cam
 
     return {

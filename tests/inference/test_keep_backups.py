@@ -233,3 +233,59 @@ def test_calibrate_refuses_collinear_clicks(tmp_path, capsys):
     assert code == 1 and "Nothing written" in err and "focal length" in err
     assert (clip / "camera.yaml").read_text() == mine and not _backups(clip, "camera.yaml")
 
+
+def _clicks_from(clip: Path, move) -> str:
+    """court_points.csv with the true camera's projections of every court point in the picture, each
+    (name, xy px) passed through ``move`` -> (name, xy px) or None."""
+    from inference.camera import Camera
+    from inference.court import load_court
+
+    cam, court = Camera.load(clip / "gt" / "camera.yaml"), load_court("padel")
+    w, h = cam.image_size
+    rows = ["name,x,y"]
+    for n in court.point_names:
+        xy = cam.project(court.points[n][None])[0]
+        moved = move(n, xy) if 0 <= xy[0] < w and 0 <= xy[1] < h else None
+        if moved is not None and moved[0] in court.points:
+            rows.append(f"{moved[0]},{moved[1][0] / w:.6f},{moved[1][1] / h:.6f}")
+    return "\n".join(rows) + "\n"
+
+
+def _swap(name: str, a: str, b: str) -> str:
+    return name.replace(a, "\0").replace(b, a).replace("\0", b)
+
+
+@pytest.mark.parametrize("kind, move, reason", [
+    ("clustered", lambda n, xy: (n, np.array([640.0, 360.0]) + (xy - [640.0, 360.0]) * 0.01), "focal length"),
+    ("mirrored left-right", lambda n, xy: (_swap(n, "left", "right"), xy), "mirrored"),
+    ("mirrored near-far", lambda n, xy: (_swap(n, "near", "far"), xy), "mirrored"),
+])
+def test_calibrate_refuses_degenerate_clicks_and_keeps_the_camera(tmp_path, capsys, kind, move, reason):
+    """Clicks bunched in a few pixels, or on the mirrored names (left/right or near/far swapped), give a
+    camera that cannot be right: refused with the reason, nothing written, the good camera.yaml kept."""
+    clip = _sample(tmp_path)
+    shutil.copy(clip / "gt" / "camera.yaml", clip / "camera.yaml")
+    mine = (clip / "camera.yaml").read_text()
+    (clip / "court_points.csv").write_text(_clicks_from(clip, move))
+    code = main(["calibrate", str(clip)])
+    err = capsys.readouterr().err
+    assert code == 1 and "Nothing written" in err and reason in err, (kind, err)
+    assert (clip / "camera.yaml").read_text() == mine and not _backups(clip, "camera.yaml")
+
+
+def test_check_judges_the_camera(tmp_path, capsys):
+    """rally3d check reads camera.yaml and judges it: a focal length of 0.035 px (what collinear clicks
+    gave before they were refused) fails with the reason; the true camera passes."""
+    from inference.camera import Camera
+
+    clip = _sample(tmp_path)
+    good = Camera.load(clip / "gt" / "camera.yaml")
+    good.save(clip / "camera.yaml")
+    assert main(["check", str(clip)]) == 0
+    K = good.K.copy()
+    K[0, 0] = K[1, 1] = 0.035
+    Camera.from_krt(K, good.R, good.t, good.image_size).save(clip / "camera.yaml")
+    assert main(["check", str(clip)]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL" in out and "camera.yaml" in out and "focal length is 0.035 px" in out
+
