@@ -2,14 +2,14 @@
 
     .venv/bin/python bench/bench_event_conditions.py [--sport tennis] [--clips 60] [--fps 50]
         [--weights shipped runs/other.pth.tar ...] [--degrade conf/data/degrade/detector_measured.yaml]
-        [--bridge-too]
+        [--no-bridge-too]
 
 Held-out simulated rallies (their own seed) with the annotated ball, pipeline-like tracks
 (``training.events.degrade`` on every clip) and real-tracker-like tracks with gaps at the contacts (whole
 pixels, the far end lost more often, the top 5 % cropped, 90 % of the near and far hits hidden); every
 event kept, ±2 frames at 50 fps (scaled). ``--degrade FILE`` adds tracks degraded with a measured setting
-(bench_track_stats.py), every clip; ``--bridge-too`` scores each model also with the gap-aware contact
-timing (:mod:`inference.events.gaps`, off by default). Prints one Markdown table per condition and the CPU time.
+(bench_track_stats.py), every clip; ``--no-bridge-too`` scores each model also without the gap-aware timing
+of the far hits (:mod:`inference.events.gaps`, on by default). Prints one Markdown table per condition and the CPU time.
 """
 from __future__ import annotations
 
@@ -37,7 +37,8 @@ def arg_parser() -> argparse.ArgumentParser:
                          "since 2026-11-29; earlier tables in docs/events.md name the ball-only HitNet `shipped`)")
     ap.add_argument("--cache", default="runs/events_cache")
     ap.add_argument("--degrade", default=None, help="a measured data.degrade YAML: one more condition")
-    ap.add_argument("--bridge-too", action="store_true", help="each model also with gap bridging (off by default)")
+    ap.add_argument("--no-bridge-too", action="store_true",
+                    help="each model also without the far hits' gap bridging (on by default)")
     ap.add_argument("--only", nargs="+", default=None, help="run only these conditions (names as printed)")
     return ap
 
@@ -61,7 +62,7 @@ def conditions_of(args, base: dict | None = None) -> dict:
     return conditions
 
 
-def event_counts(det, clips, tracks, players=None, bridge_gaps: bool = False):
+def event_counts(det, clips, tracks, players=None, bridge_gaps: bool = True):
     """Event counts of ``det`` on ``clips`` with these ball tracks (and players, one per clip), every event
     kept, ±2 frames at 50 fps (scaled)."""
     from inference.events.metrics import EventCounts, tolerance_frames
@@ -91,8 +92,8 @@ def main(argv=None) -> None:
     cs = models[0][1].class_set
     print(f"\n{args.sport}, {len(clips)} held-out simulated rallies at {args.fps:g} fps, every event kept, "
           f"±{tolerance_frames(args.fps)} frames\n")
-    variants = [(name, det, False) for name, det in models] + (
-        [(f"{name}, gap bridging", det, True) for name, det in models] if args.bridge_too else [])
+    variants = [(name, det, True) for name, det in models] + (
+        [(f"{name}, no gap bridging", det, False) for name, det in models] if args.no_bridge_too else [])
     for cond, kw in conditions.items():
         tracks = [c.ball for c in clips] if kw is None else degrade_all(clips, 11, DegradeConfig.from_dict(kw))
         print(f"**{cond}**\n\n| model | all | " + " | ".join(cs.classes[1:]) + " |\n|---|" + "---|" * cs.n)

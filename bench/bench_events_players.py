@@ -1,7 +1,7 @@
 """Ball-only vs player-aware hit-event models, per class, with and without gaps at the contacts.
 
     .venv/bin/python bench/bench_events_players.py [--sport tennis] [--clips 60] [--fps 50]
-        [--weights shipped runs/hitnet_tennis_players.pth.tar ...] [--bridge-too] [--out FILE.md]
+        [--weights shipped runs/hitnet_tennis_players.pth.tar ...] [--no-bridge-too] [--out FILE.md]
         [--degrade conf/data/degrade/detector_measured.yaml] [--only annotated real measured]
 
 Held-out simulated rallies (seed 6161, never used for training or tuning) with their articulated players
@@ -84,12 +84,12 @@ def main(argv=None) -> None:
         det = EventDetector.from_checkpoint(None if w == "shipped" else w, sport=args.sport)
         name = "shipped" if w == "shipped" else Path(w).name
         if det.wants_players:
-            rows += [(f"{name} (player-aware, with players)", det, players, False),
-                     (f"{name} (player-aware, no players)", det, no_players, False)]
+            rows += [(f"{name} (player-aware, with players)", det, players, True),
+                     (f"{name} (player-aware, no players)", det, no_players, True)]
         else:
-            rows.append((f"{name} (ball only)", det, no_players, False))
-    if args.bridge_too:
-        rows += [(f"{name}, gap bridging", det, pl, True) for name, det, pl, _ in rows]
+            rows.append((f"{name} (ball only)", det, no_players, True))
+    if args.no_bridge_too:
+        rows += [(f"{name}, no gap bridging", det, pl, False) for name, det, pl, _ in rows]
     cs = rows[0][1].class_set
     n_found = sum(p is not None and len(p) > 0 for p in players)
     lines = [f"{args.sport}, {source}; every event kept, ±2 frames at 50 fps (scaled); {n_found} clips with players",

@@ -33,10 +33,11 @@ def test_shipped_padel_default_finds_events_on_held_out_clips(clips):
     assert counts.scores()["f1"] > 0.6, counts.scores()
 
 
-def test_hits_in_gaps_keep_the_models_timing_unless_bridging_is_asked(clips):
-    """Racket hits hidden by the tracker: by default the model's own frame stands, with the spread of its
-    probability as the timing uncertainty; ``bridge_gaps=True`` times them from the flights on both sides of
-    the gap and gives the flights' uncertainty instead."""
+def test_far_hits_in_gaps_are_bridged_unless_asked_not_to(clips):
+    """Racket hits hidden by the tracker: with ``bridge_gaps=False`` the model's own frame stands, with the
+    spread of its probability as the timing uncertainty; by default the far player's hits are timed from the
+    flights on both sides of the gap, with the flights' uncertainty instead, and the near player's keep the
+    model's."""
     det = EventDetector.from_checkpoint(None, sport="padel")
     moved = 0
     for c in clips:
@@ -45,16 +46,21 @@ def test_hits_in_gaps_keep_the_models_timing_unless_bridging_is_asked(clips):
             if e.startswith("player"):
                 vis[max(f - 3, 0):f + 4] = 0  # the body hides the ball around each hit
         track = BallTrack(c.ball.frame, vis, np.where(vis[:, None] > 0, c.ball.xy, np.nan))
-        plain = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)
-        bridged = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames,
-                              bridge_gaps=True)
+        plain = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames,
+                            bridge_gaps=False)
+        bridged = det.predict(track, c.fps, c.width, c.height, camera=c.camera, n_frames=c.n_frames)
         radius = det.decode_params.peak_radius * c.fps / det.ref_fps
         assert len(plain.uncertainty) == len(plain.confidence) == len(plain.events)
         assert np.all((plain.uncertainty >= 0) & (plain.uncertainty <= radius))
         assert np.all((plain.confidence > 0) & (plain.confidence <= 1))
         assert np.array_equal(plain.probs, bridged.probs)
-        moved += int((~np.isclose(bridged.uncertainty, plain.uncertainty)).sum()) if len(bridged.events) == len(
-            plain.events) else 1
+        if len(bridged.events) == len(plain.events):
+            changed = ~np.isclose(bridged.uncertainty, plain.uncertainty)
+            near = np.array([e == "player_near" for e in bridged.events.event])
+            assert not (changed & near).any()  # the near player's hits keep the model's timing
+            moved += int(changed.sum())
+        else:
+            moved += 1
     assert moved > 0
 
 

@@ -173,6 +173,40 @@ def test_contact_in_a_gap_is_timed_from_both_flights():
     assert bridge_contact(short, fps, 40) is None
 
 
+def _far_hit_after_bounce(fps: float = 50.0, bounce: float = 30.0, hit: float = 40.4) -> np.ndarray:
+    """A far hit as a broadcast tracker sees it: the ball comes up the image fast, bounces at ``bounce`` (it
+    slows and turns), rises to the far player's racket at ``hit`` and comes back down the image; frames
+    37–44 missing."""
+    t = np.arange(90, dtype=float)
+    y = np.where(t < bounce, 0.30 - 0.012 * (t - bounce), 0.30 - 0.002 * (t - bounce))
+    y = np.where(t < hit, y, 0.30 - 0.002 * (hit - bounce) + 0.009 * (t - hit))
+    x = np.where(t < bounce, 0.5 - 0.004 * (t - bounce), 0.5 + 0.001 * (t - bounce))
+    x = np.where(t < hit, x, 0.5 + 0.001 * (hit - bounce) - 0.003 * (t - hit))
+    xy = np.stack([x, y], axis=1)
+    xy[37:45] = np.nan
+    return xy
+
+
+def test_bridged_contact_takes_neither_the_bounce_before_it_nor_a_dirty_flight():
+    """The flight into a far hit starts at the bounce before it (a decoded event): fitted across the bounce
+    the contact lands frames off, stopped there it lands within a frame; a gap that holds another event,
+    or a flight with an outlier (a tracker's jump) in it, is left to the model."""
+    from inference.events.gaps import bridge_contact, bridge_events
+
+    fps, hit = 50.0, 40.4
+    xy = _far_hit_after_bounce(fps, 30.0, hit)
+    t, sigma = bridge_contact(xy, fps, 41, others=[30])
+    assert abs(t - hit) < 1.0 and sigma <= 1.5
+    across = bridge_contact(xy, fps, 41)  # the bounce at 30 inside the incoming fit window
+    assert across is None or abs(across[0] - hit) > 1.5  # (the fit across it put the contact 1.7 frames early)
+    moved, _ = bridge_events(xy, fps, np.array([30, 39]))
+    assert moved[0] == 30 and abs(moved[1] - hit) <= 1
+    assert bridge_contact(xy, fps, 41, others=[30, 42]) is None  # two events in the gap
+    jumpy = xy.copy()
+    jumpy[34] += (0.0, 0.08)  # an 86 px outlier in the incoming flight
+    assert bridge_contact(jumpy, fps, 41, others=[30]) is None
+
+
 def _bounces_toss_serve(fps: float, toss_hit: bool = True) -> tuple[np.ndarray, int, int]:
     """A hand-made tennis serve: two bounces in the hand, the ball held, a toss that rises and falls at one
     x, then the serve, much faster, up the image. Returns (xy, toss start, serve frame)."""
