@@ -326,16 +326,51 @@ def _trimmed_span(fit: ChainFit, cfg: JointConfig) -> tuple[int, int] | None:
     return (lo, hi) if changed else None
 
 
-def _fit_with_ends(obs, plan, cfg, model, hit_prior, warm=None, mute=None) -> ChainFit | str:
-    fit = _fit_plan(obs, plan, cfg, model, hit_prior, warm=warm, mute=mute)
+def _fit_with_ends(obs, plan, cfg, model, hit_prior, warm=None, mute=None, span=None) -> ChainFit | str:
+    fit = _fit_plan(obs, plan, cfg, model, hit_prior, span=span, warm=warm, mute=mute)
     if isinstance(fit, str):
         return fit
-    span = _trimmed_span(fit, cfg)
-    if span is not None:
-        again = _fit_plan(obs, plan, cfg, model, hit_prior, span=span,
+    trimmed = _trimmed_span(fit, cfg)
+    if trimmed is not None:
+        again = _fit_plan(obs, plan, cfg, model, hit_prior, span=trimmed,
                           warm=_remember(fit.problem.chain, fit.sol.theta), mute=mute)
         if not isinstance(again, str):
             fit = again
+    if span is None:
+        fit = _shorter_free_ends(obs, plan, cfg, model, hit_prior, fit, mute)
+    return fit
+
+
+def _free_ends_of(fit: ChainFit) -> set[bool]:
+    """The free ends a fit has: True for its lead-in, False for its run-out."""
+    return {bool(f.lead_in) for f in fit.problem.chain.flights if f.end is None}
+
+
+def _shorter_free_ends(obs, plan, cfg, model, hit_prior, fit: ChainFit, mute=None) -> ChainFit:
+    """A free end trimmed away although the 2D track goes on there (the track beyond the first or last event
+    is not one flight over its whole length: a missed bounce or hit in it, as in a clip with a single event)
+    is fitted again over half the length, then a quarter, …, down to 6 frames; the first such fit that has
+    it and no more failing flights is kept."""
+    priors = [c.prior for c in plan.contacts]
+    first, last = priors[0].frame, priors[-1].frame
+    want = set()
+    if _free_end(obs, first, -1, cfg, 0, _free_end_min_seen(priors[0])) is not None:
+        want.add(True)
+    if _free_end(obs, last, +1, cfg, obs.n_frames - 1, _free_end_min_seen(priors[-1])) is not None:
+        want.add(False)
+    lost = want - _free_ends_of(fit)
+    if not lost:
+        return fit
+    ch = fit.problem.chain
+    n_ok = sum(c.ok for c in fit.checks)
+    k = int(round(cfg.free_end_seconds * obs.fps)) // 2
+    while k >= 6:
+        span = (first - k if True in lost else ch.first_frame, last + k if False in lost else ch.last_frame)
+        trial = _fit_with_ends(obs, plan, cfg, model, hit_prior, warm=_remember(ch, fit.sol.theta), mute=mute,
+                               span=span)
+        if not isinstance(trial, str) and lost <= _free_ends_of(trial) and sum(c.ok for c in trial.checks) >= n_ok:
+            return trial
+        k //= 2
     return fit
 
 
@@ -396,7 +431,8 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
             extra["iterations"] = [fit.sol.iterations]
             if fit.plan.notes:
                 extra["refits"] = list(fit.plan.notes)
-    fits = [f for f in fits if f.ok or f.segment.index not in (-1, len(obs.event_frames) - 1)]
+    single = len(set(int(f) for f in obs.event_frames)) < 2  # its free ends are the whole replay: a failed one is said
+    fits = [f for f in fits if f.ok or single or f.segment.index not in (-1, len(obs.event_frames) - 1)]
     out = RallyFit("joint", obs.fps, fits, time.perf_counter() - t0, extra=extra,
                    cpu_seconds=time.process_time() - c0, error_model=error_model)
     out.extra["plausibility"] = summary(out, obs, cfg.rms_fail_factor * cfg.pixel_sigma)

@@ -514,12 +514,17 @@ MIN_COVERED_SHARE = 0.5
 
 
 def covered_share(fit: RallyFit, obs: Observations) -> float:
-    """The share of the frames from the first to the last event that a reconstructed flight covers (1 when
-    there is at most one event frame)."""
+    """The share of the frames from the first to the last event that a reconstructed flight covers; with a
+    single event frame, of the frames from the first to the last 2D ball (a lone event's lead-in and run-out
+    are the whole replay: 3 frames of 3D beside a 180-frame track are no replay of it)."""
     ev = obs.event_frames
     if len(ev) < 2 or ev[-1] <= ev[0]:
-        return 1.0 if any(s.ok for s in fit.segments) else 0.0
-    span = np.arange(int(ev[0]), int(ev[-1]) + 1)
+        seen = np.flatnonzero(np.isfinite(obs.uv).all(axis=1))
+        if not len(seen):
+            return 1.0 if any(s.ok for s in fit.segments) else 0.0
+        span = np.arange(int(seen[0]), int(seen[-1]) + 1)
+    else:
+        span = np.arange(int(ev[0]), int(ev[-1]) + 1)
     have = np.zeros(len(span), bool)
     for s in fit.segments:
         if s.ok and len(s.frames):
@@ -561,7 +566,9 @@ def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None)
     out["covered_share"] = round(covered, 4)
     why = (["no flight reconstructed"] if not ok else []) + \
         ([f"{failed}/{n} flights failed"] if ok and failed / n > MAX_FAILED_SHARE else []) + \
-        ([f"3D for {covered:.0%} of the rally only"] if ok and covered < MIN_COVERED_SHARE else []) + \
+        ([f"3D for {covered:.0%} of the rally only" + (
+            " (a single event: the rest of the track is not one flight from it; are events missing?)"
+            if len(set(int(f) for f in obs.event_frames)) < 2 else "")] if ok and covered < MIN_COVERED_SHARE else []) + \
         ([f"{inside:.0%} of frames inside the court"] if inside < 0.98 else []) + \
         ([f"{below} contacts below the floor"] if below else []) + \
         ([f"{over} flights over the RMS limit"] if over else [])

@@ -175,3 +175,24 @@ def test_a_hit_whose_hitter_was_not_found_is_not_pulled_to_the_partner(padel):
     assert lob.ok, lob.reason
     err = np.linalg.norm(lob.xyz - gt.xyz[np.searchsorted(gt.frame, lob.frames)], axis=1)
     assert np.median(err) < 0.5, np.median(err)
+
+
+def test_a_single_event_clip_gets_its_run_out_and_is_not_called_plausible():
+    """The tennis sample with only its far hit at frame 72 left (the events stage missed the rest): the track
+    on both sides is not one flight over its whole length, yet the ball flies from the hit for 37 frames
+    before its next bounce — the run-out is fitted over a shorter stretch instead of being trimmed away —
+    and 3D for a fraction of a 180-frame track is not called a plausible replay (it was: 3 frames,
+    "covered" 100 %)."""
+    clip = Clip(SAMPLE / "tennis_sample")
+    obs, _, _ = prepare(clip, Setting(noise_px=1.0))
+    keep = obs.event_frames == 72
+    from dataclasses import replace
+
+    obs = replace(obs, event_frames=obs.event_frames[keep], event_labels=[lab for lab, k in zip(obs.event_labels,
+                                                                                               keep) if k])
+    fit = fit_joint(obs)
+    run_out = [s for s in fit.segments if s.segment.start_event == "player_far" and s.segment.end_event is None]
+    assert run_out and run_out[0].ok and len(run_out[0].frames) >= 15, [(s.segment, s.reason) for s in fit.segments]
+    p = fit.extra["plausibility"]
+    assert not p["plausible"] and p["covered_share"] < 0.5
+    assert any("single event" in why for why in p["not_plausible_because"])
