@@ -97,7 +97,8 @@ def row(name: str, s: dict) -> str:
     return (f"| {name} | {cls('player_near')} | {cls('player_far')} | {cls('serve_far')} | {cls('ground')} | "
             f"{s['other_runs_per_s']:.2f} / {s['other_runs_s'][1] if s['other_runs_s'] else float('nan'):.2f} | "
             f"{s['other_miss_share']:.2f} | {s['jitter_px']} | {s['top_gap_share']} / {s['top_frame_share']} / {s['top_gap_s']} | "
-            f"{' / '.join(f'{q:.2f}' for q in s['serve_flight_s']) if s['serve_flight_s'] else '–'} |")
+            f"{' / '.join(f'{q:.2f}' for q in s['serve_flight_s']) if s['serve_flight_s'] else '–'} | "
+            f"{' / '.join(f'{q:.2f}' for q in s['shot_flight_s']) if s.get('shot_flight_s') else '–'} |")
 
 
 def main(argv=None) -> int:
@@ -119,7 +120,7 @@ def main(argv=None) -> int:
     t0 = time.process_time()
     cols = ("| tracks | near hits: hidden / gap s median (25–90 %) | far hits (not serves) | far serves | bounces | "
             "other misses per s / median s | other-miss share | jitter px | gaps above the picture: share of gaps / "
-            "of frames / median s | serve → bounce s (10 / 50 / 90 %) |")
+            "of frames / median s | serve → bounce s (10 / 50 / 90 %) | rally shot → bounce s (10 / 50 / 90 %) |")
     for sport, read in (("tennis", real_tennis), ("padel", real_padel)):
         real = measure(read(root))
         base = experiment_degrade(sport)
@@ -139,11 +140,14 @@ def main(argv=None) -> int:
                                                     camera=REAL_VIEW[sport]), args.seed, None))
         print(f"\n## {sport}: {real['clips']} real clips, {args.sims} simulated rallies per setting\n")
         print(cols)
-        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         print(row("real", real))
         if view is not None:
             print(row(f"simulated, clean, the real material's view ({REAL_VIEW[sport]})", view))
         print(row(f"simulated, clean, the training camera ({DEFAULT_CAMERA[sport]})", clean))
+        if sport == "tennis":  # the tour pace (training.synth.rally.TENNIS_TOUR): a final's rally shots
+            tour = simulate_clips(sport, args.sims, args.seed, cache, progress=False, pace="tour")
+            print(row("simulated, clean, the training camera, tour pace", measure(simulated(tour, args.seed, None))))
         print(row("simulated, the shipped tagger's degradation", shipped))
         print(row("simulated, fitted to the real tracks", refit))
         if not args.no_write:

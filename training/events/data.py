@@ -334,6 +334,8 @@ class EventDataModule(L.LightningDataModule):
         neg_ratio: negatives per positive per epoch. cache_dir: simulated clips are cached here.
         around: share of the synthetic clips simulated with the server's bounces before the serve and the
             ball after the point (not events: the model learns they are none).
+        tour: share of the synthetic clips played at a tour final's pace (tennis: faster, flatter
+            groundstrokes, :data:`training.synth.rally.TENNIS_TOUR`); the rest at the club pace.
         degrade: :class:`~training.events.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
@@ -357,7 +359,8 @@ class EventDataModule(L.LightningDataModule):
                  num_workers: int = 0, cache_dir: str | None = None, augment: dict | None = None,
                  degrade: dict | None = None, root_weights: list[float] | None = None,
                  split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None,
-                 sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2, prep_workers: int = 0):
+                 sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2, prep_workers: int = 0,
+                 tour: float = 0.0):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -379,6 +382,16 @@ class EventDataModule(L.LightningDataModule):
         if not 0.0 <= float(around) <= 1.0:
             raise ValueError(f"data.around must be a fraction in [0, 1], got {around!r}")
         self.around = float(around)
+        if not 0.0 <= float(tour) <= 1.0:
+            raise ValueError(f"data.tour must be a fraction in [0, 1], got {tour!r}")
+        if tour and source == "synthetic":
+            from training.synth.rally import default_config
+
+            try:
+                default_config(sport, "tour")
+            except KeyError as e:
+                raise ValueError(f"data.tour: {e.args[0]}; set data.tour=0") from None
+        self.tour = float(tour)
         self._sources = None
         self.clip_source: dict[str, list[int]] = {}  # per split: the root index of each clip
         self.counts = {"train": n_train, "val": n_val, "test": n_test}
@@ -417,14 +430,19 @@ class EventDataModule(L.LightningDataModule):
         else:
             offset = {"train": 0, "val": 1, "test": 2}[split]
             n = self.counts[split]
-            n_around = int(round(self.around * n))
+            n_tour = int(round(self.tour * n))
             pl = self.features.poses  # players articulated and projected only when the model reads them
             w = self.prep_workers
-            clips = simulate_clips(self.sport, n - n_around, self.seed * 10 + offset, self.cache_dir,
-                                   players=pl, workers=w) if n > n_around else []
-            if n_around:  # rallies with the server's bounces before the serve and the ball after the point
-                clips += simulate_clips(self.sport, n_around, self.seed * 10 + offset + 5, self.cache_dir, around=True,
-                                        players=pl, workers=w)
+            clips = []
+            for pace, n_pace, base in (("club", n - n_tour, self.seed * 10 + offset),
+                                       ("tour", n_tour, self.seed * 10 + offset + 1000)):
+                n_around = int(round(self.around * n_pace))
+                if n_pace > n_around:
+                    clips += simulate_clips(self.sport, n_pace - n_around, base, self.cache_dir, players=pl,
+                                            workers=w, pace=pace)
+                if n_around:  # rallies with the server's bounces before the serve and the ball after the point
+                    clips += simulate_clips(self.sport, n_around, base + 5, self.cache_dir, around=True,
+                                            players=pl, workers=w, pace=pace)
         return clips
 
     def labelled(self, split: str) -> list[LabelledClip]:

@@ -54,7 +54,7 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     n = int(max(track.frame.max() + 1 if len(track) else 0, events.frame.max() + 1 if len(events) else 0))
     out = {"hidden": {c: [] for c in CLASSES}, "gap_s": {c: [] for c in CLASSES}, "where": {c: [] for c in CLASSES},
            "other_runs_s": [], "seconds": 0.0, "visible": 0, "missed_other": 0, "jitter": [], "integer": [],
-           "gaps": 0, "top_gaps": 0, "top_gap_s": [], "serve_flight_s": []}
+           "gaps": 0, "top_gaps": 0, "top_gap_s": [], "serve_flight_s": [], "shot_flight_s": []}
     if not len(events) or not n:
         return out
     dense = track.dense(n)
@@ -66,6 +66,10 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     ev = [str(c) for c in events.event]
     if len(ev) > 1 and ev[0] in ("player_near", "player_far") and ev[1] == "ground":  # the serve's own flight
         out["serve_flight_s"].append(float(events.frame[1] - events.frame[0]) / fps)
+    hits = [k for k, c in enumerate(ev) if c in ("player_near", "player_far")]
+    for k in hits[1:]:  # the rally's shots (not the serve): the hit to the bounce that follows it
+        if k + 1 < len(ev) and ev[k + 1] == "ground":
+            out["shot_flight_s"].append(float(events.frame[k + 1] - events.frame[k]) / fps)
     runs = [(s + a, e + a) for s, e in _runs(~seen[a:b])]
     for k, (f, c) in enumerate(zip(events.frame.tolist(), events.event.tolist())):
         if k == 0 and c == "player_far":
@@ -132,6 +136,8 @@ def measure(clips, margin_s: float = 0.2) -> dict:
     out["top_frame_share"] = round(sum(s.get("top_frames", 0) for s in pool) / max(frames, 1), 4)
     flights = [g for s in pool for g in s.get("serve_flight_s", [])]
     out["serve_flight_s"] = [round(float(q), 3) for q in np.quantile(flights, (0.1, 0.5, 0.9))] if flights else None
+    shots = [g for s in pool for g in s.get("shot_flight_s", [])]
+    out["shot_flight_s"] = [round(float(q), 3) for q in np.quantile(shots, (0.1, 0.5, 0.9))] if shots else None
     top_s = [g for s in pool for g in s["top_gap_s"]]
     out["top_gap_s"] = round(float(np.median(top_s)), 2) if top_s else None
     return out

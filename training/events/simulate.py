@@ -105,20 +105,21 @@ def project_track(rally, camera: Camera) -> BallTrack:
 
 
 def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: float | None = None,
-                  players: bool = False, camera: str | None = None) -> SimClip:
+                  players: bool = False, camera: str | None = None, pace: str = "club") -> SimClip:
     """One rally with a randomised camera; the same seed gives the same clip. ``around``: add the
     server's bounces before the serve and the ball after the point (not events; ``rally`` marks the
     point); ``fps``: fix the frame rate; ``players``: articulate the players (they swing at their hits)
     and keep their exact 2D poses in ``SimClip.players`` (own random stream: the rest is unchanged);
     ``camera``: the camera preset (default the sport's, :data:`DEFAULT_CAMERA`; ``padel_broadcast`` for
-    the broadcast view, whose picture high lobs leave through the top)."""
+    the broadcast view, whose picture high lobs leave through the top); ``pace``: ``club`` (default) or
+    ``tour`` (tennis at a men's final's pace, :data:`training.synth.rally.TENNIS_TOUR`)."""
     court = court or load_court(sport)
     r_cam, r_rally = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     spec = CameraSpec.preset(camera or DEFAULT_CAMERA[sport]).randomised(r_cam)
     if fps is not None:
         spec = replace(spec, fps=float(fps))
     camera = spec.build(court)
-    config = default_config(sport)
+    config = default_config(sport, pace)
     if around:
         config = replace(config, around=REAL_AROUND)
     rally = simulate_rally(court, spec.fps, r_rally, sport=sport, config=config)
@@ -134,16 +135,18 @@ def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: 
 
 def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None = None,
                    progress: bool = True, around: bool = False, fps: float | None = None,
-                   players: bool = False, workers: int = 0, camera: str | None = None) -> list[SimClip]:
+                   players: bool = False, workers: int = 0, camera: str | None = None,
+                   pace: str = "club") -> list[SimClip]:
     """``n`` clips with seeds ``seed * 1_000_003 + k``; cached as a pickle under ``cache_dir``
-    (``around``, ``fps``, ``players``, ``camera``: see :func:`simulate_clip`); ``workers > 1``: simulated in
-    that many forked processes (the same clips, :mod:`.parallel`)."""
+    (``around``, ``fps``, ``players``, ``camera``, ``pace``: see :func:`simulate_clip`); ``workers > 1``:
+    simulated in that many forked processes (the same clips, :mod:`.parallel`)."""
     if n <= 0:
         raise ValueError(f"need at least one clip, got n={n}")
+    default_config(sport, pace)  # an unknown pace fails here, before any work
     cache = None
     if cache_dir is not None:
         parts = [sport, n, seed, SIM_VERSION] + ([around, fps] if around or fps else []) \
-            + (["players"] if players else []) + ([camera] if camera else [])
+            + (["players"] if players else []) + ([camera] if camera else []) + ([pace] if pace != "club" else [])
         key = hashlib.sha1(json.dumps(parts).encode()).hexdigest()[:10]
         cache = Path(cache_dir) / f"sim_{sport}_{n}_{seed}_{key}.pkl"
         if cache.is_file():
@@ -152,7 +155,7 @@ def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None =
     court = load_court(sport)
 
     def one(k: int) -> SimClip:
-        return simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players, camera)
+        return simulate_clip(sport, seed * 1_000_003 + k, court, around, fps, players, camera, pace)
 
     if workers and workers > 1 and can_fork():
         log.info("simulating %d %s rallies in %d processes", n, sport, workers)

@@ -30,7 +30,7 @@ Example:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -346,12 +346,27 @@ TENNIS = RallyConfig(
 
 CONFIGS = {"padel": PADEL, "tennis": TENNIS}
 
+#: Tennis at the pace of a men's tour final: groundstrokes faster, flatter and lower over the net. Fitted to a
+#: real final's rally shots (a hit to the next bounce, not the serve): 0.64 / 0.86 / 1.23 s at 10 / 50 / 90 %
+#: real, 0.70 / 0.88 / 1.14 s with these ranges, 0.88 / 1.10 / 1.30 s with the default ones (bench/
+#: bench_real_track_stats.py prints them). The default pace stays the club player's (the sample, the tests).
+TENNIS_TOUR = replace(TENNIS, shots={
+    **TENNIS.shots,
+    "topspin": replace(TENNIS.shots["topspin"], speed=(24.0, 48.0), spin=(20.0, 55.0), clearance=(0.15, 1.0)),
+    "slice": replace(TENNIS.shots["slice"], speed=(16.0, 36.0), clearance=(0.1, 0.7)),
+})
 
-def default_config(sport: str) -> RallyConfig:
-    """The default :class:`RallyConfig` of a sport."""
-    if sport not in CONFIGS:
-        raise KeyError(f"no rally configuration for sport {sport!r}; known: {sorted(CONFIGS)}")
-    return CONFIGS[sport]
+#: the rally configurations by pace: ``club`` (the default) and the sports that have a ``tour`` one
+PACES = {"club": CONFIGS, "tour": {"tennis": TENNIS_TOUR}}
+
+
+def default_config(sport: str, pace: str = "club") -> RallyConfig:
+    """The :class:`RallyConfig` of a sport at a pace (``club``: the default; ``tour``: tennis only)."""
+    if pace not in PACES:
+        raise KeyError(f"no rally pace {pace!r}; known: {sorted(PACES)}")
+    if sport not in PACES[pace]:
+        raise KeyError(f"no {pace} rally configuration for sport {sport!r}; known: {sorted(PACES[pace])}")
+    return PACES[pace][sport]
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -126,3 +126,13 @@ def test_simulated_tennis_serves_fly_at_broadcast_speed():
     assert len(flights) >= 30
     assert 0.37 <= float(np.median(flights)) <= 0.45
     assert float(np.quantile(flights, 0.9)) <= 0.53
+
+
+def test_real_stats_time_the_rally_shots_apart_from_the_serve():
+    """A rally shot's flight (a hit that is not the point's first, to the bounce after it) is measured apart
+    from the serve's: what the tour pace of the simulator is fitted to."""
+    track, _ = _clip_with_far_serve((60 - 20, 60 + 5))
+    ev = HitEvents([60, 90, 110, 152, 170], ["player_far", "ground", "player_near", "ground", "player_far"])
+    s = measure([(track, ev, 50.0, 1920, 1080)])
+    assert s["serve_flight_s"][1] == pytest.approx(30 / 50)
+    assert s["shot_flight_s"][1] == pytest.approx(42 / 50)  # 110 → 152; the last hit has no bounce after it
