@@ -40,7 +40,7 @@ chromium:
 	  else echo "The browser tests need Debian chromium at $(CHROMIUM): run 'sudo apt-get install chromium' (or set CHROMIUM=/path)"; exit 1; fi; }
 
 test: venv chromium
-	$(PY) -m pytest -m "not slow" -q
+	$(PY) -m pytest -m "not slow" -q --durations=15
 
 test-all: venv chromium
 	$(PY) -m pytest -q
