@@ -55,8 +55,8 @@ demo: venv
 	@if [ "$(SERVE)" = 1 ]; then $(VENV)/bin/rally3d review $(DEMO)/padel_sample; fi
 
 sample: venv
-	$(PY) -m training.synth.sample datasets/sample
-	$(PY) -m training.synth.contact_sheet datasets/sample/contact_sheet.jpg $(SAMPLE) datasets/sample/tennis_sample
+	$(PY) -m synth.sample datasets/sample
+	$(PY) -m synth.contact_sheet datasets/sample/contact_sheet.jpg $(SAMPLE) datasets/sample/tennis_sample
 
 bench: venv
 	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

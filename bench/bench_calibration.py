@@ -22,7 +22,7 @@ import numpy as np
 from inference.calibration import CalibrationError, calibrate_court
 from inference.camera import Camera
 from inference.court import load_court
-from training.synth.cameras import CameraSpec
+from synth.cameras import CameraSpec
 
 FLOOR_12 = ["near_left", "near_right", "far_left", "far_right", "near_service_left", "near_service_center",
             "near_service_right", "far_service_left", "far_service_center", "far_service_right", "net_left",

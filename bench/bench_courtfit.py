@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from inference.courtfit.fit import N_FRAMES, fit_court_frames, sample_frame_indices
-from training.synth.generate import SynthConfig, SynthScene
+from synth.generate import SynthConfig, SynthScene
 
 from bench_calibration import FLOOR_12, GOALS, error_cells, goals_text  # noqa: E402  (bench/ is on the path)
 

@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 def make_data(root: Path, n_train: int, n_test: int, seed: int, max_frames: int) -> None:
     """n_train + 1 (val) + n_test shifted-look clips with a manifest (generated once)."""
     from inference.clipio import Manifest, ManifestEntry
-    from training.synth.generate import SynthConfig, generate_clip
+    from synth.generate import SynthConfig, generate_clip
 
     if (root / "manifest.yaml").is_file():
         return

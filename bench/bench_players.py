@@ -24,7 +24,7 @@ from inference.court import load_court
 from inference.players.evaluate import DetectionNoise, score, simulate_detections
 from inference.players.importers import load_predictions, write_mmpose_json
 from inference.players.tracking import TRACKERS, TrackingConfig, players_from_poses
-from training.synth.generate import SynthConfig, generate_dataset
+from synth.generate import SynthConfig, generate_dataset
 
 SEEDS = {"padel": 300, "tennis": 400}
 

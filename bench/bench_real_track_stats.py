@@ -106,7 +106,7 @@ def main(argv=None) -> int:
 
     from bench_real import real_root
     from training.events.real_stats import degrade_from, measure, top_crop_for
-    from training.synth.generate import DEFAULT_CAMERA
+    from synth.generate import DEFAULT_CAMERA
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--sims", type=int, default=60, help="simulated rallies per sport and setting")
@@ -145,7 +145,7 @@ def main(argv=None) -> int:
         if view is not None:
             print(row(f"simulated, clean, the real material's view ({REAL_VIEW[sport]})", view))
         print(row(f"simulated, clean, the training camera ({DEFAULT_CAMERA[sport]})", clean))
-        if sport == "tennis":  # the tour pace (training.synth.rally.TENNIS_TOUR): a final's rally shots
+        if sport == "tennis":  # the tour pace (synth.rally.TENNIS_TOUR): a final's rally shots
             tour = simulate_clips(sport, args.sims, args.seed, cache, progress=False, pace="tour")
             print(row("simulated, clean, the training camera, tour pace", measure(simulated(tour, args.seed, None))))
         print(row("simulated, the shipped tagger's degradation", shipped))

@@ -18,7 +18,7 @@ from inference.clipio import Clip, Manifest
 from inference.reconstruct.api import METHOD_NAMES, methods
 from inference.reconstruct.cli import sensitivity_table
 from inference.reconstruct.evaluate import Setting, evaluate, format_table
-from training.synth.generate import SynthConfig, generate_dataset
+from synth.generate import SynthConfig, generate_dataset
 
 SEEDS = {"padel": 100, "tennis": 200}
 

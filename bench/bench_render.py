@@ -14,9 +14,9 @@ import numpy as np
 
 from inference.camera import Camera
 from inference.court import load_court
-from training.synth.bodies import articulate
-from training.synth.render import Appearance, CourtRenderer, ball_exposure
-from training.synth.types import BallPath, InactiveBall, PlayerPlan, Swing
+from synth.bodies import articulate
+from synth.render import Appearance, CourtRenderer, ball_exposure
+from synth.types import BallPath, InactiveBall, PlayerPlan, Swing
 
 FPS = 30.0
 

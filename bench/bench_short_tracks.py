@@ -4,11 +4,11 @@ trajectories that monocular methods are compared on. Prints the 3D error split a
 frame's line of sight, and how many tracks were reconstructed, with the hit and the bounce as events and
 with the bounce alone (one event), and — as `rally3d infer` has it from players.csv — with the hitter's
 court position (``--hitter SIGMA``: the body 0.4–1.1 m (table tennis 0.2–0.7 m) to one side of the ball and 0.2 m behind it, plus
-SIGMA m of noise per axis; :func:`training.synth.short_tracks.hitter_players`).
+SIGMA m of noise per axis; :func:`synth.short_tracks.hitter_players`).
 
     .venv/bin/python bench/bench_short_tracks.py [--sport tennis|table_tennis] [--tracks 30] [--seed 0] [--hitter 0.3]
 
-The tracks are simulated by training/synth/short_tracks.py (court and ball from conf/court/<sport>.yaml; the
+The tracks are simulated by synth/short_tracks.py (court and ball from conf/court/<sport>.yaml; the
 motion-capture tracks of the literature are table tennis, tennis is the same shape at ten times the scale):
 drag, Magnus with random topspin or slice, the rigid-ball impact (restitution and friction of the playing
 surface) at the bounce, then 3–8 frames; the first frame is a random phase after the hit. They are not made by `rally3d synth` and the reconstruction knows only the court YAML, the camera, the
@@ -29,7 +29,7 @@ from inference.camera import Camera  # noqa: E402
 from inference.court import load_court  # noqa: E402
 from inference.reconstruct import Observations  # noqa: E402
 from inference.reconstruct.joint import JointConfig, fit_joint  # noqa: E402
-from training.synth.short_tracks import FPS, REACH, VIEWS, draw_tracks, hitter_players  # noqa: E402
+from synth.short_tracks import FPS, REACH, VIEWS, draw_tracks, hitter_players  # noqa: E402
 
 SIZE = (1280, 720)
 

@@ -65,7 +65,7 @@ def cli_startup(repeat: int) -> dict:
 def held_out_clips(data: Path, sizes: list[tuple[int, int]], n: int, frames: int, seed: int) -> dict:
     """``{"1280x720": [Clip, ...]}``: padel clips of each size (generated once into ``data``)."""
     from inference.clipio import Clip, Manifest
-    from training.synth.generate import SynthConfig, generate_dataset
+    from synth.generate import SynthConfig, generate_dataset
 
     out = {}
     for k, (w, h) in enumerate(sizes):

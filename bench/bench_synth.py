@@ -17,11 +17,11 @@ import numpy as np
 
 from inference.clipio import write_video
 from inference.court import load_court
-from training.synth.bodies import articulate
-from training.synth.cameras import CameraSpec
-from training.synth.generate import SynthConfig, generate_clip
-from training.synth.rally import simulate_rally
-from training.synth.render import Appearance, CourtRenderer, ball_exposure
+from synth.bodies import articulate
+from synth.cameras import CameraSpec
+from synth.generate import SynthConfig, generate_clip
+from synth.rally import simulate_rally
+from synth.render import Appearance, CourtRenderer, ball_exposure
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -7,7 +7,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("inference", "training", "labeler")
+PACKAGES = ("inference", "synth", "training", "labeler")
 
 
 def module_name(path: Path) -> str:
@@ -119,3 +119,16 @@ def test_the_runtime_library_imports_no_other_project_package():
     upward = sorted(f"{m} → {d}" for m, deps in graph.items() if m.split(".")[0] == "inference"
                     for d in deps if d.split(".")[0] != "inference")
     assert not upward, upward
+
+
+#: what each room may import besides itself (docs/architecture.md): the runtime library nothing; the generator
+#: (a product feature, ``rally3d synth``) the runtime library; training and the labeler build on both
+ROOM_MAY_IMPORT = {"inference": set(), "synth": {"inference"}, "training": {"inference", "synth"},
+                   "labeler": {"inference", "synth"}}
+
+
+def test_every_room_imports_only_the_rooms_below_it():
+    graph = import_graph(project_files())
+    wrong = sorted(f"{m} → {d}" for m, deps in graph.items() for d in deps
+                   if d.split(".")[0] != m.split(".")[0] and d.split(".")[0] not in ROOM_MAY_IMPORT[m.split(".")[0]])
+    assert not wrong, "imports against the rooms' rule (docs/architecture.md): " + "; ".join(wrong)

@@ -75,7 +75,7 @@ def infer_manifest(root: str | Path, seed: int = 0, fractions: Sequence[float] =
 
 def _infer(root: str | Path, seed: int, fractions: Sequence[float]) -> tuple[Manifest, int]:
     """:func:`infer_manifest` and how many clips state their split in clip.yaml."""
-    from training.synth.generate import split_assignment
+    from synth.generate import split_assignment
 
     root = Path(root)
     folders = clip_folders(root) if root.is_dir() else []

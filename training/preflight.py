@@ -24,7 +24,7 @@ from pathlib import Path
 
 
 # the generator's unfinished-folder marker lives with the generator; named here for the dataset checks
-from training.synth.partial import PARTIAL, read_marker, refuse_unfinished, unfinished_generation  # noqa: F401
+from synth.partial import PARTIAL, read_marker, refuse_unfinished, unfinished_generation  # noqa: F401
 
 #: The small default datasets the experiments read (the README's command), by folder name.
 DEFAULT_DATASETS = {
@@ -110,7 +110,7 @@ def check_data(cfg, generate=None) -> list[str]:
 def default_dataset_state(root: str | Path) -> str | None:
     """Why a default dataset folder must be made (``does not exist``, ``is an unfinished …``, ``holds 3 generated
     clip folders but no manifest.yaml …``); None when it is finished, or holds clips a person made (read as they are)."""
-    from training.synth.cli import check_out_folder
+    from synth.cli import check_out_folder
 
     root = Path(root)
     if not root.exists():
@@ -210,7 +210,7 @@ def generate_default(root: str | Path, spec: dict) -> None:
     resumed (``generate_dataset``)."""
     from tqdm import tqdm
 
-    from training.synth.generate import SynthConfig, generate_dataset
+    from synth.generate import SynthConfig, generate_dataset
 
     print(f"{_shown(root)} {default_dataset_state(root) or 'is made again'}: generating the default dataset now — "
           f"{spec['clips']} {spec['sport']} clips of up to {spec['max_frames']} frames, about {_minutes(spec)} on a "

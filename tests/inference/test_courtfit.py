@@ -20,7 +20,7 @@ from inference.courtfit.fit import (MIN_K2_REACH, _distance_to_polylines, _evide
 from inference.courtfit.lines import LineEvidence, background, hough_lines, line_mask, working_scale
 from inference.courtfit.model import court_lines
 from inference.courtfit.search import elevation_deg, find_lines, split_lines
-from training.synth.generate import SynthConfig, SynthScene
+from synth.generate import SynthConfig, SynthScene
 
 SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample" / "padel_sample"
 FLOOR = ["near_left", "near_right", "far_left", "far_right", "near_service_left", "near_service_center",

@@ -198,7 +198,7 @@ def _validate_single(overrides: list[str], ckpt: Path, out: Path) -> tuple[dict[
 def test_ddp_sim_wasb_global_val_f1_equals_single_process(tmp_path):
     """WASB on a fresh tiny dataset, 2 gloo processes, fresh cache: the run's val/f1 and its TP/FP/FN are
     those one process measures with the same weights on the same validation clips."""
-    from training.synth.generate import SynthConfig, generate_dataset
+    from synth.generate import SynthConfig, generate_dataset
 
     data = tmp_path / "synth_padel"
     generate_dataset(data, 3, seed=8, config=SynthConfig(sport="padel", randomise_camera=False, width=320,

@@ -19,7 +19,7 @@ DEBUGS = sorted(p.stem for p in (ROOT / "conf" / "debug").glob("*.yaml"))
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory) -> Path:
-    from training.synth.generate import SynthConfig, generate_dataset
+    from synth.generate import SynthConfig, generate_dataset
 
     root = tmp_path_factory.mktemp("template") / "synth_padel"
     generate_dataset(root, 3, seed=5, config=SynthConfig(sport="padel", randomise_camera=False, width=320, height=192,

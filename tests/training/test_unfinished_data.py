@@ -15,10 +15,10 @@ import pytest
 from conftest import wait_until
 from training_fixtures import ROOT, compose_cfg, tiny_padel  # noqa: F401  (fixtures)
 
-import training.synth.generate as generate
+import synth.generate as generate
 from training.datasets import resolve_source
 from training.preflight import PARTIAL, check_data, default_dataset_state, generate_default
-from training.synth.generate import SynthConfig, generate_dataset
+from synth.generate import SynthConfig, generate_dataset
 
 TINY = {"randomise_camera": False, "width": 160, "height": 96, "codec": "mp4v", "randomise_look": False}
 REAL_CLIP = generate.generate_clip

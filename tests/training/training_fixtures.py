@@ -12,7 +12,7 @@ import pytest
 from conftest import compose_cfg
 
 from inference.clipio import BallTrack, Clip, write_video
-from training.synth.generate import SynthConfig, generate_clip
+from synth.generate import SynthConfig, generate_clip
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -87,7 +87,7 @@ def labeler_clips(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def tiny_padel(tmp_path_factory) -> Path:
     """Three short synthetic padel clips with a manifest (train, val, test)."""
-    from training.synth.generate import generate_dataset
+    from synth.generate import generate_dataset
 
     root = tmp_path_factory.mktemp("tinyset") / "synth_padel"
     generate_dataset(root, 3, seed=5, config=SynthConfig(sport="padel", randomise_camera=False, width=320,

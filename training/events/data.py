@@ -335,7 +335,7 @@ class EventDataModule(L.LightningDataModule):
         around: share of the synthetic clips simulated with the server's bounces before the serve and the
             ball after the point (not events: the model learns they are none).
         tour: share of the synthetic clips played at a tour final's pace (tennis: faster, flatter
-            groundstrokes, :data:`training.synth.rally.TENNIS_TOUR`); the rest at the club pace.
+            groundstrokes, :data:`synth.rally.TENNIS_TOUR`); the rest at the club pace.
         degrade: :class:`~training.events.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
@@ -385,7 +385,7 @@ class EventDataModule(L.LightningDataModule):
         if not 0.0 <= float(tour) <= 1.0:
             raise ValueError(f"data.tour must be a fraction in [0, 1], got {tour!r}")
         if tour and source == "synthetic":
-            from training.synth.rally import default_config
+            from synth.rally import default_config
 
             try:
                 default_config(sport, "tour")

@@ -26,10 +26,10 @@ from inference.camera import Camera
 from inference.clipio import BallTrack, HitEvents, PlayerTracks, private_temp_path
 from inference.court import load_court
 from inference.skeleton import COCO17
-from training.synth.cameras import CameraSpec
-from training.synth.generate import DEFAULT_CAMERA
-from training.synth.groundtruth import event_table, inside_image
-from training.synth.rally import REAL_AROUND, default_config, simulate_rally
+from synth.cameras import CameraSpec
+from synth.generate import DEFAULT_CAMERA
+from synth.groundtruth import event_table, inside_image
+from synth.rally import REAL_AROUND, default_config, simulate_rally
 
 from .parallel import can_fork, map_clips
 
@@ -57,7 +57,7 @@ class SimClip:
 
 
 def project_players(poses, camera: Camera) -> PlayerTracks:
-    """The articulated players (:func:`training.synth.bodies.articulate`) seen by ``camera``, as
+    """The articulated players (:func:`synth.bodies.articulate`) seen by ``camera``, as
     ``gt/players.csv`` holds them: normalised 2D keypoints (score 1 inside the image and in front of the
     camera, else missing), boxes of the projected joints, court position under the ankles' midpoint, team."""
     size = np.asarray(camera.image_size, float)
@@ -112,7 +112,7 @@ def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: 
     and keep their exact 2D poses in ``SimClip.players`` (own random stream: the rest is unchanged);
     ``camera``: the camera preset (default the sport's, :data:`DEFAULT_CAMERA`; ``padel_broadcast`` for
     the broadcast view, whose picture high lobs leave through the top); ``pace``: ``club`` (default) or
-    ``tour`` (tennis at a men's final's pace, :data:`training.synth.rally.TENNIS_TOUR`)."""
+    ``tour`` (tennis at a men's final's pace, :data:`synth.rally.TENNIS_TOUR`)."""
     court = court or load_court(sport)
     r_cam, r_rally = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     spec = CameraSpec.preset(camera or DEFAULT_CAMERA[sport]).randomised(r_cam)
@@ -125,7 +125,7 @@ def simulate_clip(sport: str, seed: int, court=None, around: bool = False, fps: 
     rally = simulate_rally(court, spec.fps, r_rally, sport=sport, config=config)
     tracks = None
     if players:
-        from training.synth.bodies import articulate
+        from synth.bodies import articulate
 
         r_body = np.random.default_rng([seed, 31])
         tracks = project_players([articulate(p, spec.fps, r_body, sport=sport) for p in rally.players], camera)

@@ -1,5 +1,5 @@
 """Rally segmentation (inference/events/rally.py), the generator's warm-up bounces and the ball after the
-point (training/synth/rally.py AroundPointSpec), and one model across frame rates."""
+point (synth/rally.py AroundPointSpec), and one model across frame rates."""
 from __future__ import annotations
 
 import dataclasses
@@ -77,7 +77,7 @@ def test_rally_yaml_round_trip_and_errors(tmp_path):
 
 def test_generator_around_point_is_off_by_default_and_marks_the_point():
     from inference.court import load_court
-    from training.synth.rally import REAL_AROUND, default_config, simulate_rally
+    from synth.rally import REAL_AROUND, default_config, simulate_rally
 
     court = load_court("padel")
     cfg = default_config("padel")

@@ -28,7 +28,7 @@ def zoom(frame: np.ndarray, factor: float = 2.5) -> np.ndarray:
 @pytest.fixture(scope="module")
 def rally(tmp_path_factory) -> Path:
     """A 640×360 tennis rally of 90 frames whose frames 40–59 are a close-up; camera.yaml given."""
-    from training.synth.generate import SynthConfig, generate_clip
+    from synth.generate import SynthConfig, generate_clip
 
     root = tmp_path_factory.mktemp("court_views") / "rally"
     cfg = SynthConfig(sport="tennis", randomise_camera=False, fps=30.0, width=640, height=360, codec="mp4v",

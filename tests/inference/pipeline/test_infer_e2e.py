@@ -14,7 +14,7 @@ from inference.clipio import Clip
 
 @pytest.fixture(scope="module")
 def generated_clip(tmp_path_factory) -> Path:
-    from training.synth.generate import SynthConfig, generate_clip
+    from synth.generate import SynthConfig, generate_clip
 
     root = tmp_path_factory.mktemp("e2e") / "rally"
     cfg = SynthConfig(sport="padel", camera="padel_installed", randomise_camera=False, fps=30.0, width=1280,

@@ -17,7 +17,7 @@ from inference.pipeline.stages import build_stages
 
 @pytest.fixture(scope="module")
 def tennis_clip(tmp_path_factory) -> Path:
-    from training.synth.generate import SynthConfig, generate_clip
+    from synth.generate import SynthConfig, generate_clip
 
     root = tmp_path_factory.mktemp("players") / "rally"
     cfg = SynthConfig(sport="tennis", randomise_camera=False, fps=30.0, width=640, height=360, codec="mp4v",

@@ -66,7 +66,7 @@ def padel():
 @pytest.fixture(scope="module")
 def walls(tmp_path_factory):
     """A generated padel rally with glass contacts and the players' gt court positions in players.csv."""
-    from training.synth.generate import SynthConfig, generate_clip
+    from synth.generate import SynthConfig, generate_clip
 
     root = tmp_path_factory.mktemp("baselines") / "clip"
     config = SynthConfig(sport="padel", randomise_camera=False, width=1280, height=720, fps=30.0,

@@ -107,8 +107,8 @@ def test_a_toss_before_the_first_event_is_kept_in_depth():
 def test_a_diverging_hypothesis_does_not_sink_the_clip():
     """A padel rally with the server's warm-up bounces and the ball after the point (not events): one of the
     refit hypotheses diverges (a NaN contact time); that hypothesis fails, the clip is still reconstructed."""
-    from training.synth.generate import SynthConfig, SynthScene
-    from training.synth.groundtruth import ball_3d_table, event_table, inside_image
+    from synth.generate import SynthConfig, SynthScene
+    from synth.groundtruth import ball_3d_table, event_table, inside_image
 
     scene = SynthScene.build(4, SynthConfig(sport="padel", around_point=True))
     gt, ev = ball_3d_table(scene.rally), event_table(scene.rally)

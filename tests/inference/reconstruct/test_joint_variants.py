@@ -10,7 +10,7 @@ from inference.court import load_court
 from inference.reconstruct import Observations
 from inference.reconstruct.evaluate import Setting, prepare
 from inference.reconstruct.joint import JointConfig, fit_joint
-from training.synth.generate import SynthConfig, generate_clip
+from synth.generate import SynthConfig, generate_clip
 
 
 @pytest.fixture(scope="module")

@@ -23,13 +23,13 @@ def _lob_rally():
     """A simulated padel rally filmed from the broadcast preset (high behind the near glass, the whole court in
     view): its highest lob (apex 9.5 m) leaves the top of the picture for 36 frames; 2 px noise, the true
     events."""
-    from training.synth.rally import simulate_rally
+    from synth.rally import simulate_rally
 
     court = load_court("padel")
     rally = simulate_rally(court, 25.0, np.random.default_rng(1))
     from dataclasses import replace
 
-    from training.synth.cameras import CameraSpec
+    from synth.cameras import CameraSpec
 
     cam = replace(CameraSpec.preset("padel_broadcast"), width=SIZE[0], height=SIZE[1]).build(court)
     xyz = rally.ball.sample(rally.frame_times)

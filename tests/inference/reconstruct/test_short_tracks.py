@@ -17,7 +17,7 @@ from inference.physics import FlightModel, bounce, integrate
 from inference.reconstruct import Observations
 from inference.reconstruct.joint import JointConfig, fit_joint
 from inference.reconstruct.observations import contact_priors
-from training.synth.short_tracks import FPS, VIEWS, draw_tracks, hitter_players
+from synth.short_tracks import FPS, VIEWS, draw_tracks, hitter_players
 
 SIZE = (1280, 720)
 

@@ -189,7 +189,7 @@ def test_analyse_rally_speeds_net_clearance_and_serve_detection():
 def test_calls_agree_with_the_simulators_verdicts(sport):
     """The simulator judges every rally's last shot itself (winner, out, net, glass); our calls on its
     exact contacts must agree."""
-    from training.synth.rally import simulate_rally
+    from synth.rally import simulate_rally
 
     court = load_court(sport)
     expected = {"winner": {"in"}, "error_out": {"out", "fault"}, "error_wall": {"out", "fault"},

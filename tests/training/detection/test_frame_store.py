@@ -18,7 +18,7 @@ from inference.detection.geometry import Letterbox
 from training.detection import frame_store
 from training.detection.data import BallWindows, ClipData, WindowSpec, _cache_key, collate, load_clip
 from training.detection.frame_store import FrameStore, StoreError, write_store
-from training.synth.generate import SynthConfig, generate_clip
+from synth.generate import SynthConfig, generate_clip
 
 NET = (144, 256)
 

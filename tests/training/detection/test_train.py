@@ -10,7 +10,7 @@ from conftest import compose_cfg
 import torch
 
 from training.run import evaluate, train
-from training.synth.generate import SynthConfig, generate_dataset
+from synth.generate import SynthConfig, generate_dataset
 
 ROOT = Path(__file__).resolve().parents[3]
 EVENT_MODELS = ("hitnet", "tagger")  # the hit-event experiments run in tests/training/events/test_hitnet_train.py

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from inference.court import load_court
-from training.synth.rally import Zones, default_config, simulate_rally
+from synth.rally import Zones, default_config, simulate_rally
 
 SEEDS = range(30)
 FPS = 30.0

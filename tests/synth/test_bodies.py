@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from training.synth.bodies import (
+from synth.bodies import (
     BODY,
     CAPSULE_MATERIALS,
     CAPSULE_NAMES,
@@ -12,7 +12,7 @@ from training.synth.bodies import (
     articulate,
     capsules,
 )
-from training.synth.types import COCO17, PlayerPlan, Swing
+from synth.types import COCO17, PlayerPlan, Swing
 
 FPS = 30.0
 J = {name: i for i, name in enumerate(COCO17)}

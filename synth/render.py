@@ -40,8 +40,8 @@ import numpy as np
 
 from inference.camera import Camera
 from inference.court import Court, Plane, points_in_polygon
-from training.synth.bodies import CAPSULE_MATERIALS, PlayerPose, capsules
-from training.synth.types import BallPath, InactiveBall
+from synth.bodies import CAPSULE_MATERIALS, PlayerPose, capsules
+from synth.types import BallPath, InactiveBall
 
 Colour = tuple[int, int, int]
 UP = np.array([0.0, 0.0, 1.0])

@@ -40,7 +40,7 @@ import numpy as np
 from inference.court import Court, Material, Plane
 from inference.physics import DEFAULT_DT, FlightModel, rk4_step
 from inference.physics import bounce as impact
-from training.synth.types import Contact
+from synth.types import Contact
 
 #: Index ranges of the 9-component state rows (x, y, z, vx, vy, vz, wx, wy, wz).
 POS, VEL, SPIN = slice(0, 3), slice(3, 6), slice(6, 9)

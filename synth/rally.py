@@ -1,4 +1,4 @@
-"""The rally planner: a whole padel or tennis point as a :class:`~training.synth.types.Rally`.
+"""The rally planner: a whole padel or tennis point as a :class:`~synth.types.Rally`.
 
 How a rally is made (all times in seconds from the clip's first frame):
 
@@ -9,7 +9,7 @@ How a rally is made (all times in seconds from the clip's first frame):
 3. Each shot: a shot type (drive, lob, volley, ...) is drawn for the stroke, then a target in the
    opponent's half (the diagonal service box for the serve), a spin and a net clearance (or, for the
    tennis serve, a speed); the launch velocity is solved on the drag + Magnus flight
-   (:func:`~training.synth.physics.solve_launch`) and kept if its speed is in the shot's range. The flight
+   (:func:`~synth.physics.solve_launch`) and kept if its speed is in the shot's range. The flight
    is simulated with its contacts on a coarse step and judged (in, net, out, glass before the floor).
 4. The receiving team's players who can get there in time (quintic, minimum-jerk-like moves within
    their speed and acceleration limits, after a reaction time) are scored over the hittable part of the
@@ -36,7 +36,7 @@ import numpy as np
 
 from inference.court import Court
 from inference.physics import DEFAULT_DT, FlightModel
-from training.synth.physics import (
+from synth.physics import (
     Flight,
     Launch,
     lower_to_net_height,
@@ -44,7 +44,7 @@ from training.synth.physics import (
     solve_launch,
     vacuum_launch,
 )
-from training.synth.types import BallPath, Contact, InactiveBall, PlayerPlan, Rally, Swing
+from synth.types import BallPath, Contact, InactiveBall, PlayerPlan, Rally, Swing
 
 Range = tuple[float, float]
 TWO_PI = 2.0 * np.pi
@@ -365,7 +365,8 @@ def default_config(sport: str, pace: str = "club") -> RallyConfig:
     if pace not in PACES:
         raise KeyError(f"no rally pace {pace!r}; known: {sorted(PACES)}")
     if sport not in PACES[pace]:
-        raise KeyError(f"no {pace} rally configuration for sport {sport!r}; known: {sorted(PACES[pace])}")
+        what = "" if pace == "club" else f"{pace} "
+        raise KeyError(f"no {what}rally configuration for sport {sport!r}; known: {sorted(PACES[pace])}")
     return PACES[pace][sport]
 
 

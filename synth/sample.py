@@ -2,7 +2,7 @@
 
 Regenerate it bit for bit (same package versions, see constraints.txt) with::
 
-    make sample        # = .venv/bin/python -m training.synth.sample datasets/sample
+    make sample        # = .venv/bin/python -m synth.sample datasets/sample
 """
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def make_sample(out: str | Path) -> Manifest:
     for c in SAMPLE_CLIPS:
         generate_clip(out / c.name, c.seed, c.config)
     manifest = Manifest(out, [ManifestEntry(c.name, "test") for c in SAMPLE_CLIPS], name="sample",
-                        source="python -m training.synth.sample datasets/sample")
+                        source="python -m synth.sample datasets/sample")
     manifest.save()
     return manifest
 

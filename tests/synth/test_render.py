@@ -9,9 +9,9 @@ import pytest
 
 from inference.camera import Camera
 from inference.court import load_court
-from training.synth.bodies import articulate
-from training.synth.render import Appearance, CourtRenderer, ball_exposure, exposure_times
-from training.synth.types import BallPath, InactiveBall, PlayerPlan
+from synth.bodies import articulate
+from synth.render import Appearance, CourtRenderer, ball_exposure, exposure_times
+from synth.types import BallPath, InactiveBall, PlayerPlan
 
 SIZE = (1280, 720)
 FPS = 30.0

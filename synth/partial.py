@@ -1,4 +1,4 @@
-"""The marker of an unfinished generation (``rally3d synth`` / :func:`~training.synth.generate.generate_dataset`
+"""The marker of an unfinished generation (``rally3d synth`` / :func:`~synth.generate.generate_dataset`
 interrupted): a folder holding :data:`PARTIAL` is never read as a dataset, and generating it again resumes it.
 Read by the generator and by the training run's dataset checks (:mod:`training.preflight`)."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 import yaml
 
 PARTIAL = ".synth_partial.yaml"
-"""The marker of a generation in progress in a dataset folder (``training.synth.generate.generate_dataset``):
+"""The marker of a generation in progress in a dataset folder (``synth.generate.generate_dataset``):
 written before the first clip, removed after ``manifest.yaml``. A folder holding it is unfinished: it is never
 read as a dataset, and generating it again resumes it."""
 

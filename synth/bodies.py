@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from training.synth.types import PlayerPlan, Swing
+from synth.types import PlayerPlan, Swing
 
 UP = np.array([0.0, 0.0, 1.0])
 MIN_WRIST = 0.4  # closest the wrist comes to its shoulder, as a fraction of the arm's length

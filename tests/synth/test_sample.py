@@ -24,11 +24,11 @@ import cv2
 import numpy as np
 import pytest
 
-import training.synth.generate as generate
+import synth.generate as generate
 from inference.clipio import Clip
-from training.synth.sample import SAMPLE_CLIPS, make_sample
+from synth.sample import SAMPLE_CLIPS, make_sample
 
-SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
+SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample"
 VIDEO_SUFFIXES = {".mp4", ".mov", ".mkv", ".avi", ".webm"}
 MIN_PSNR_DB = 40.0
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")

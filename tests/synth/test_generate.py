@@ -6,8 +6,8 @@ import pytest
 
 from inference.clipio import Clip, Manifest
 from inference.court import load_court
-from training.synth.generate import SynthConfig, generate_clip, generate_dataset, split_assignment
-from training.synth.render import Appearance, CourtRenderer
+from synth.generate import SynthConfig, generate_clip, generate_dataset, split_assignment
+from synth.render import Appearance, CourtRenderer
 
 FAST = dict(randomise_camera=False, width=1280, height=720, fps=30.0, max_frames=48, codec="mp4v")
 

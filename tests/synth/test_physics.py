@@ -1,5 +1,5 @@
 """Ball flight physics: the RK4 integrator (inference.physics) and the event-driven flight with bounces,
-net and walls (training.synth.physics), and the launch solver."""
+net and walls (synth.physics), and the launch solver."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 
 from inference.court import Material, load_court
 from inference.physics import FlightModel, integrate, rk4_step
-from training.synth.physics import (
+from synth.physics import (
     bounce,
     free_flight,
     lower_to_net_height,

@@ -1,6 +1,6 @@
 """A contact sheet: a PNG/JPEG grid of frames from clip folders, each with a zoomed inset of the ball.
 
-    .venv/bin/python -m training.synth.contact_sheet OUT.jpg CLIP [CLIP ...] [--per-clip 4]
+    .venv/bin/python -m synth.contact_sheet OUT.jpg CLIP [CLIP ...] [--per-clip 4]
 """
 from __future__ import annotations
 
