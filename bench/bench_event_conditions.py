@@ -5,7 +5,7 @@
         [--no-bridge-too]
 
 Held-out simulated rallies (their own seed) with the annotated ball, pipeline-like tracks
-(``training.events.degrade`` on every clip) and real-tracker-like tracks with gaps at the contacts (whole
+(``training.events.synthetic.degrade`` on every clip) and real-tracker-like tracks with gaps at the contacts (whole
 pixels, the far end lost more often, the top 5 % cropped, 90 % of the near and far hits hidden); every
 event kept, ±2 frames at 50 fps (scaled). ``--degrade FILE`` adds tracks degraded with a measured setting
 (bench_track_stats.py), every clip; ``--no-bridge-too`` scores each model also without the gap-aware timing
@@ -80,8 +80,8 @@ def event_counts(det, clips, tracks, players=None, bridge_gaps: bool = True):
 def main(argv=None) -> None:
     from inference.events import EventDetector
     from inference.events.metrics import tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.simulate import simulate_clips
 
     args = arg_parser().parse_args(argv)
     conditions = conditions_of(args)

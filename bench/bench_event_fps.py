@@ -3,7 +3,7 @@
     .venv/bin/python bench/bench_event_fps.py [--sport padel] [--clips 30] [--weights FILE] [--players]
 
 The same simulated rallies (held-out seed) at 25, 30, 50 and 60 fps, with the annotated ball, with
-pipeline-like tracks (``training.events.degrade``, every clip degraded) and with real-tracker-like ones
+pipeline-like tracks (``training.events.synthetic.degrade``, every clip degraded) and with real-tracker-like ones
 (the same plus whole-pixel positions, the far end lost more often, the top 5 % of the image cropped and
 the far player's hits hidden like the near one's: gaps at the contacts); tolerance ±40 ms (±2 frames at
 50 fps, scaled and rounded). The model is the one ``rally3d events`` picks for the sport (``--weights``: another);
@@ -23,10 +23,10 @@ MEASURED = "conf/data/pose_noise/movenet_measured.yaml"  # MoveNet and the playe
 def main(argv=None) -> None:
     from inference.events import EventDetector
     from inference.events.detector import choose_weights
-    from training.events.pose_noise import PoseNoiseConfig, noisy_all
+    from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all
     from inference.events.metrics import EventCounts, tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.simulate import simulate_clips
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--sport", default="padel")

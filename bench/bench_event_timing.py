@@ -26,9 +26,9 @@ def main(argv=None) -> None:
     from inference.events import EventDetector
     from inference.events.detector import choose_weights, has_players
     from inference.events.metrics import tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.pose_noise import PoseNoiseConfig, noisy_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all
+    from training.events.synthetic.simulate import simulate_clips
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--sport", default="tennis")

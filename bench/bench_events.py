@@ -27,9 +27,9 @@ def timed(fn, clips) -> float:
 
 
 def main() -> None:
-    from training.events.data import WindowSet, label_clips
-    from training.events.rf import ForestScorer
-    from training.events.simulate import simulate_clips
+    from training.events.data.datamodule import WindowSet, label_clips
+    from training.events.models.rf import ForestScorer
+    from training.events.synthetic.simulate import simulate_clips
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--clips", type=int, default=20)

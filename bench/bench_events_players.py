@@ -5,7 +5,7 @@
         [--degrade conf/data/degrade/detector_measured.yaml] [--only annotated real measured]
 
 Held-out simulated rallies (seed 6161, never used for training or tuning) with their articulated players
-(they swing at their hits) seen through pose-backend noise (``training.events.pose_noise``: misses, the far
+(they swing at their hits) seen through pose-backend noise (``training.events.synthetic.pose_noise``: misses, the far
 player more often, jitter, lost wrists, left/right flips, near/far swaps, clips without players or
 poses); every event kept, ±2 frames at 50 fps (scaled with fps). Ball conditions: the annotated track,
 a real-tracker-like track without gaps at the contacts (whole pixels, the far end lost more often, the top
@@ -41,7 +41,7 @@ def rendered(dirs: list[Path], backend: str = "movenet"):
     """Rendered clips as simulated ones (true ball, events, camera) and the players MoveNet finds in them."""
     from bench_pose_stats import players_of
 
-    from training.events.simulate import SimClip
+    from training.events.synthetic.simulate import SimClip
 
     clips, players = [], []
     for d in dirs:
@@ -56,9 +56,9 @@ def main(argv=None) -> None:
     import logging
 
     from inference.events import EventDetector
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.pose_noise import PoseNoiseConfig, noisy_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all
+    from training.events.synthetic.simulate import simulate_clips
 
     ap = arg_parser()
     ap.add_argument("--out", type=Path, help="also write the tables here")

@@ -78,9 +78,9 @@ def main(argv=None) -> None:
     from bench_events_players import GAPS
     from inference.court import load_court
     from inference.events import EventDetector
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.pose_noise import PoseNoiseConfig, noisy_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all
+    from training.events.synthetic.simulate import simulate_clips
 
     logging.getLogger("inference.events.detector").setLevel(logging.ERROR)
     torch.set_num_threads(1)

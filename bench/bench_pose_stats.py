@@ -1,6 +1,6 @@
 """What a pose backend and the players stage do to the players, measured on rendered clips with ground truth
 (``rally3d synth``): players missed and bridged, the joints' offset and jitter, wrists on something else,
-left/right swaps, court-position error (:mod:`training.events.pose_stats`), and the ``data.pose_noise``
+left/right swaps, court-position error (:mod:`training.events.stats.pose_stats`), and the ``data.pose_noise``
 settings that reproduce them. Writes both to a YAML (default ``conf/data/pose_noise/movenet_measured.yaml``)
 and checks the settings: the same statistics of the clips' true players put through the noise model.
 
@@ -85,8 +85,8 @@ def players_of(clip_dir: Path, backend_name: str = "movenet", cache: Path = CACH
 
 def simulated(truths, settings: dict, seed: int = 0):
     """The truths' exact players through the noise model with ``settings`` (pose_noise.noisy_players)."""
-    from training.events.pose_noise import PoseNoiseConfig, noisy_players
-    from training.events.pose_stats import PoseClipTruth
+    from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_players
+    from training.events.stats.pose_stats import PoseClipTruth
 
     cfg = PoseNoiseConfig.from_dict({**settings, "p_no_players": 0.0, "p_no_poses": 0.0})
     out = []
@@ -100,7 +100,7 @@ def simulated(truths, settings: dict, seed: int = 0):
 def main(argv=None) -> dict:
     import yaml
 
-    from training.events.pose_stats import PoseClipTruth, measure_players, pose_noise_settings, refine_settings
+    from training.events.stats.pose_stats import PoseClipTruth, measure_players, pose_noise_settings, refine_settings
 
     ap = argparse.ArgumentParser()
     ap.add_argument("clips", nargs="+", type=Path, help="rendered clip folders with gt/players.csv")

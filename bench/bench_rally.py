@@ -44,8 +44,8 @@ def main(argv=None) -> dict:
     from inference.events.detector import choose_weights, has_players
     from inference.events.features import dense_xy
     from inference.events.metrics import EventCounts, tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.simulate import simulate_clips
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--sport", default="padel")
@@ -73,7 +73,7 @@ def main(argv=None) -> dict:
     tracks = [c.ball for c in clips] if args.track == "annotated" else degrade_all(clips, args.seed, degrade)
     players = [None] * len(clips)
     if args.players:
-        from training.events.pose_noise import PoseNoiseConfig, noisy_all
+        from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all
 
         players = noisy_all(clips, 17, PoseNoiseConfig.from_file(MEASURED_POSE_NOISE))
     weights = choose_weights(args.weights, args.sport, next((p for p in players if has_players(p)), None))

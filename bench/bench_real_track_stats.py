@@ -1,6 +1,6 @@
 """Real ball tracks beside simulated ones: what a real tracker (and a hand annotation) does around the
 events, measured the same way on simulated rallies degraded as the shipped event tagger was trained, and as
-the setting fitted from the real figures (:mod:`training.events.real_stats`). Prints one table per sport and
+the setting fitted from the real figures (:mod:`training.events.stats.real_stats`). Prints one table per sport and
 writes the fitted ``data.degrade`` settings (``conf/data/degrade/real_<sport>_broadcast.yaml``).
 
     .venv/bin/python bench/bench_real_track_stats.py [--sims 60] [--no-write]
@@ -75,7 +75,7 @@ REAL_VIEW = {"tennis": "tennis_broadcast", "padel": "padel_broadcast"}
 
 def simulated(clips, seed: int, degrade: dict | None):
     """``clips`` (:class:`SimClip`) as ``measure`` takes them: degraded by ``degrade`` (None: the clean track)."""
-    from training.events.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
 
     tracks = degrade_all(clips, seed, DegradeConfig.from_dict(degrade)) if degrade else [c.ball for c in clips]
     return [(t, c.events, c.fps, c.width, c.height) for t, c in zip(tracks, clips)]
@@ -105,7 +105,7 @@ def main(argv=None) -> int:
     import yaml
 
     from bench_real import real_root
-    from training.events.real_stats import degrade_from, measure, top_crop_for
+    from training.events.stats.real_stats import degrade_from, measure, top_crop_for
     from synth.generate import DEFAULT_CAMERA
 
     ap = argparse.ArgumentParser()
@@ -124,7 +124,7 @@ def main(argv=None) -> int:
     for sport, read in (("tennis", real_tennis), ("padel", real_padel)):
         real = measure(read(root))
         base = experiment_degrade(sport)
-        from training.events.simulate import simulate_clips
+        from training.events.synthetic.simulate import simulate_clips
 
         cache = ROOT / "runs" / "events_cache"
         sims = simulate_clips(sport, args.sims, args.seed, cache, progress=False)

@@ -1,6 +1,6 @@
 """What our ball detector does to a track, measured on rendered clips with ground truth (``rally3d synth``):
 miss rate by the ball's image size and distance and near contacts, gap lengths, false detections and
-how far they lie, jitter, whole pixels (:mod:`training.events.track_stats`), and the ``data.degrade``
+how far they lie, jitter, whole pixels (:mod:`training.events.stats.track_stats`), and the ``data.degrade``
 settings that reproduce them. Writes both to a YAML (default ``conf/data/degrade/detector_measured.yaml``).
 
     .venv/bin/python bench/bench_track_stats.py CLIP[=DETECTED_CSV] ... [--out FILE] [--tau 10]
@@ -45,7 +45,7 @@ def main(argv=None) -> dict:
     import yaml
 
     from inference.clipio import Clip, read_ball_csv
-    from training.events.track_stats import ClipTruth, degrade_settings, measure_clips
+    from training.events.stats.track_stats import ClipTruth, degrade_settings, measure_clips
 
     ap = argparse.ArgumentParser()
     ap.add_argument("clips", nargs="+", help="CLIP_DIR or CLIP_DIR=DETECTED_BALL_CSV")

@@ -1,5 +1,5 @@
 """What every training task shares (detectors here in :mod:`training.run`, hit events in
-:mod:`training.events.run` and :mod:`training.events.crop_run`): the data, model and trainer built from the
+:mod:`training.events.run` and :mod:`training.events.models.crop_run`): the data, model and trainer built from the
 composed config, debug modes and progress, resuming from a checkpoint, the guarded evaluation table and the
 results files. It imports no task, so the tasks can import it (no import circle)."""
 from __future__ import annotations

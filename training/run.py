@@ -33,7 +33,7 @@ def train(cfg: DictConfig) -> dict[str, float]:
     apply_debug(cfg)
     check_data(cfg)
     if cfg.get("task") == "events" and str(cfg.model.get("_target_", "")).endswith("CropHitNetModule"):
-        from training.events.crop_run import train_crop_events  # hitnet_crop_* experiments
+        from training.events.models.crop_run import train_crop_events  # hitnet_crop_* experiments
 
         return train_crop_events(cfg)
     if cfg.get("task") == "events":  # hit-event models (conf/experiment/hitnet_*.yaml)
@@ -109,7 +109,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     their event-set tables instead (training/events/run.py)."""
     check_data(cfg)
     if cfg.get("task") == "events" and str(cfg.model.get("_target_", "")).endswith("CropHitNetModule"):
-        from training.events.crop_run import evaluate_crop_events
+        from training.events.models.crop_run import evaluate_crop_events
 
         return evaluate_crop_events(cfg)
     if cfg.get("task") == "events":

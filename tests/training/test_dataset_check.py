@@ -124,7 +124,7 @@ def test_event_clips_without_video_count_frames_from_their_events(tmp_path):
     """Found by tests/inference/clipio/test_dataset_fuzz.py: no n_frames, no video and a header-only ball.csv
     gave the clip 0 frames although events.csv names frames 2 and 7 (an IndexError deep in the features); a
     clip where nothing names a frame is skipped like an unlabelled one."""
-    from training.events.data import clips_with_source
+    from training.events.data.datamodule import clips_with_source
 
     for name, events in (("a", "frame,event\n2,ground\n7,player_near\n"), ("b", "frame,event\n")):
         (tmp_path / name).mkdir()

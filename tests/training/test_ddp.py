@@ -45,7 +45,7 @@ RANK_SCRIPT = textwrap.dedent('''
     det.outputs["val"] = [(z["pred_vis"][shard], z["pred_xy"][shard], z["score"][shard], z["vis"][shard],
                            z["gt"][shard])]
     report = det.report("val").as_dict()
-    from training.events.module import log_event_metrics
+    from training.events.models.hitnet import log_event_metrics
     class Fake:                                   # what log_event_metrics needs of a LightningModule
         logged = {}
         trainer = type("T", (), {"sanity_checking": False})()
@@ -64,7 +64,7 @@ def test_counts_all_reduced_over_two_gloo_ranks_equal_single_process(tmp_path):
     """Two real processes in a gloo group, each with half of the frames: the detector report (F1, counts,
     RMSE, AP) and the hit-event F1 are the single-process figures of all frames, on both ranks."""
     from inference.detection.metrics import evaluate_detections
-    from training.events.module import macro_event_f1
+    from training.events.models.hitnet import macro_event_f1
 
     rng = np.random.default_rng(3)
     n = 101                                            # odd: the ranks get 51 and 50 frames
@@ -106,7 +106,7 @@ def test_counts_all_reduced_over_two_gloo_ranks_equal_single_process(tmp_path):
 
 # ------------------------------------------------------------------------------ evaluation shards
 def test_eval_shards_cover_the_set_once_without_padding():
-    from training.events.data import BalancedSampler
+    from training.events.data.datamodule import BalancedSampler
 
     y = torch.tensor([0, 1, 0, 0, 2, 0, 0, 3, 0, 0, 0, 1, 0])
     base = BalancedSampler(y, 1.0, seed=4, fixed=True)

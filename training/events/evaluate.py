@@ -20,7 +20,7 @@ from inference.events.detector import EventDetector
 from inference.events.features import FeatureConfig, from_ref_frames, to_ref_frames
 from inference.events.metrics import EventCounts, tolerance_frames
 
-from .simulate import SimClip
+from training.events.synthetic.simulate import SimClip
 
 Scorer = Callable[[SimClip, BallTrack], np.ndarray]
 

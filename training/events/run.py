@@ -27,10 +27,10 @@ from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
 from training.common import guarded_table, resume_path, save_manifests, write_eval_results
 
-from .data import EventDataModule
-from .degrade import DegradeConfig, degrade_all
-from .evaluate import counts_for, detector_scorer, fit_temperature, score_all, tune_decoder
-from .simulate import perturb
+from training.events.data.datamodule import EventDataModule
+from training.events.synthetic.degrade import DegradeConfig, degrade_all
+from training.events.evaluate import counts_for, detector_scorer, fit_temperature, score_all, tune_decoder
+from training.events.synthetic.simulate import perturb
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +123,7 @@ def event_tables(det: EventDetector, dm: EventDataModule, name: str, split: str 
                  ) -> tuple[dict[str, float], str, list[dict]]:
     """Event-set metrics on ``split`` (its first ``max_clips``) with the clips' own ball track (``gt``);
     with :func:`degraded_rows`, also detector-like (:func:`perturb`, ``e2e``) and pipeline-like
-    (:func:`~training.events.degrade.degrade`, every clip degraded, ``deg``) tracks made from it.
+    (:func:`~training.events.synthetic.degrade.degrade`, every clip degraded, ``deg``) tracks made from it.
     Returns the scores, the Markdown tables and one flat row per table line (results files)."""
     clips = [c.sim for c in dm.labelled(split)][: max_clips or None]
     scorer = detector_scorer(det)
@@ -133,7 +133,7 @@ def event_tables(det: EventDetector, dm: EventDataModule, name: str, split: str 
     if degraded_rows(cfg, dm):
         modes += [("e2e", "detector-like ball made from it (misses, jitter, false positives)",
                    lambda: [perturb(c, rng) for c in clips]),
-                  ("deg", "pipeline-like ball made from it (training.events.degrade, every clip degraded)",
+                  ("deg", "pipeline-like ball made from it (training.events.synthetic.degrade, every clip degraded)",
                    lambda: degrade_all(clips, noise_seed, DegradeConfig(p_clean=0.0)))]
     out, tables, rows = {}, [], []
     for mode, what, tracks in modes:

@@ -105,7 +105,7 @@ def read_event_clips(root: Path) -> None:
     """What EventDataModule reads of every clip with ball.csv and events.csv, and their class labels."""
     from inference.events.classes import ClassSet
     from inference.events.features import FeatureConfig
-    from training.events.data import clips_with_source, label_clips
+    from training.events.data.datamodule import clips_with_source, label_clips
 
     sims = [c for c, _ in clips_with_source(str(root), "all")]
     label_clips(sims, ClassSet.load("padel6"), FeatureConfig())

@@ -9,7 +9,7 @@ import pytest
 from inference.clipio import BallTrack, Clip, ClipInfo, HitEvents, read_events_csv
 from inference.events import ClassSet, DecodeParams, EventCounts, EventDetector, FeatureConfig, HitNet, tolerance_frames
 from inference.events.detector import ball_only_weights
-from training.events.simulate import simulate_clips
+from training.events.synthetic.simulate import simulate_clips
 
 
 @pytest.fixture(scope="module")

@@ -15,8 +15,8 @@ from inference.events.features import (
     window_labels,
     window_probs_to_frames,
 )
-from training.events.data import label_clips
-from training.events.simulate import simulate_clips
+from training.events.data.datamodule import label_clips
+from training.events.synthetic.simulate import simulate_clips
 
 
 @pytest.fixture(scope="module")

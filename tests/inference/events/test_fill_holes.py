@@ -9,7 +9,7 @@ import pytest
 from inference.clipio import BallTrack
 from inference.events import EventDetector
 from inference.events.features import FeatureConfig, clip_features, dense_xy, fill_holes
-from training.events.simulate import simulate_clips
+from training.events.synthetic.simulate import simulate_clips
 
 
 def _parabola(n: int = 40) -> np.ndarray:

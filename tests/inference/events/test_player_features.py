@@ -15,7 +15,7 @@ from inference.court import load_court
 from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig, HitNet
 from inference.events.features import PLAYER_COLUMNS, clip_features, player_features, racket_hand
 from inference.events.metrics import EventCounts
-from training.events.simulate import simulate_clip, simulate_clips
+from training.events.synthetic.simulate import simulate_clip, simulate_clips
 
 COL = {n: i for i, n in enumerate(PLAYER_COLUMNS)}
 P = len(PLAYER_COLUMNS)
@@ -201,7 +201,7 @@ def test_the_shipped_player_model_beats_the_ball_only_one_without_players(sport)
     players.csv it finds more of the events than the ball-only model."""
     from inference.events import detector as mod
     from inference.events.metrics import EventCounts, tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
 
     clips = simulate_clips(sport, 6, seed=6262, progress=False, fps=50.0)
     tracks = degrade_all(clips, 3, DegradeConfig(p_clean=0.0, integer_px=True, far_miss=0.3))

@@ -99,7 +99,7 @@ def test_generator_around_point_is_off_by_default_and_marks_the_point():
 
 
 def test_detector_reports_rally_events_apart_and_keep_all():
-    from training.events.simulate import simulate_clip
+    from training.events.synthetic.simulate import simulate_clip
 
     c = simulate_clip("padel", 11, around=True, fps=50.0)
     det = EventDetector.from_checkpoint(None, sport="padel")
@@ -115,7 +115,7 @@ def test_detector_reports_rally_events_apart_and_keep_all():
 def test_one_model_across_frame_rates_tolerance_in_time():
     """The same rallies simulated at 25/30/60 fps: the shipped model (reference rate 50) scores within
     a band of its 50 fps score; the tolerance is ±40 ms at every rate (±1 frame at 25/30, ±2 at 60)."""
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.simulate import simulate_clips
 
     for fps in (25.0, 30.0, 60.0):
         assert tolerance_frames(fps) / fps == pytest.approx(0.04, abs=0.0085)
@@ -342,7 +342,7 @@ def test_bounces_in_opposite_halves_do_not_end_the_point():
 
 
 def test_floor_positions_invert_the_camera():
-    from training.events.simulate import simulate_clip
+    from training.events.synthetic.simulate import simulate_clip
 
     from inference.events.rally import floor_positions
 

@@ -9,9 +9,9 @@ import torch
 
 from inference.events import ClassSet, DecodeParams, EventDetector, FeatureConfig
 from inference.events.network import EventTagger
-from training.events.data import AugmentConfig, LabelledClip, augment_batch
-from training.events.simulate import simulate_clip
-from training.events.tagger import IGNORE, SequenceSet, frame_targets
+from training.events.data.datamodule import AugmentConfig, LabelledClip, augment_batch
+from training.events.synthetic.simulate import simulate_clip
+from training.events.models.tagger import IGNORE, SequenceSet, frame_targets
 
 
 def _detector(features: FeatureConfig, class_set: ClassSet) -> EventDetector:
@@ -109,9 +109,9 @@ def test_the_shipped_tagger_beats_the_window_model_with_gaps_at_the_contacts(spo
     events within ±2 frames than the player-aware HitNet with the same inputs (docs/events.md#event-tagger)."""
     from inference.events import detector as mod
     from inference.events.metrics import EventCounts, tolerance_frames
-    from training.events.degrade import DegradeConfig, degrade_all
-    from training.events.pose_noise import PoseNoiseConfig, noisy_all
-    from training.events.simulate import simulate_clips
+    from training.events.synthetic.degrade import DegradeConfig, degrade_all
+    from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all
+    from training.events.synthetic.simulate import simulate_clips
 
     clips = simulate_clips(sport, 6, seed=6262, progress=False, fps=50.0, players=True)
     players = noisy_all(clips, 5, PoseNoiseConfig.from_file("conf/data/pose_noise/movenet_measured.yaml"))

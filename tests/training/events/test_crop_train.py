@@ -13,8 +13,8 @@ import torch
 
 from inference.events import EventDetector
 from inference.events.features import FeatureConfig, make_windows, window_labels
-from training.events.crop_data import CropChunkSet, CropEventDataModule
-from training.events.crop_module import CropAugment, CropHitNetModule, augment_crop_batch
+from training.events.data.crop_data import CropChunkSet, CropEventDataModule
+from training.events.models.crop import CropAugment, CropHitNetModule, augment_crop_batch
 
 ROOT = Path(__file__).resolve().parents[3]
 HITNET = ROOT / "inference" / "weights" / "hitnet_padel.pth.tar"

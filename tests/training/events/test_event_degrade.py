@@ -1,4 +1,4 @@
-"""The detector-degradation model (training/events/degrade.py) on real simulated padel rallies: gaps at the
+"""The detector-degradation model (training/events/synthetic/degrade.py) on real simulated padel rallies: gaps at the
 near player's hits, miss and outlier rates as configured, the smoother, clean clips, config errors, and
 the data module's fresh draws per epoch."""
 from __future__ import annotations
@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from training.events.data import EventDataModule
-from training.events.degrade import DegradeConfig, degrade, degrade_all
-from training.events.simulate import simulate_clip
+from training.events.data.datamodule import EventDataModule
+from training.events.synthetic.degrade import DegradeConfig, degrade, degrade_all
+from training.events.synthetic.simulate import simulate_clip
 
 OFF = dict(p_clean=0.0, p_occlude_near=0.0, p_occlude_far=0.0, p_gap_event=0.0, miss_frac=0.0, outlier_frac=0.0,
            jitter_px=(0.0, 0.0), p_smooth=0.0)

@@ -1,4 +1,4 @@
-"""The end-to-end evaluation of the hit-event models (training/events/e2e.py) on the embedded sample: a
+"""The end-to-end evaluation of the hit-event models (training/events/studies/e2e.py) on the embedded sample: a
 ``rally3d infer``-style output folder is read like the pipeline writes ball.csv (coasts withdrawn, RTS
 smoother) and scored against the clip's ground-truth events."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from inference.clipio import BallTrack, read_ball_csv, write_ball_csv
-from training.events.e2e import entry_of, from_infer_dir, main, pipeline_ball, real_counts, track_quality
+from training.events.studies.e2e import entry_of, from_infer_dir, main, pipeline_ball, real_counts, track_quality
 
 ROOT = Path(__file__).resolve().parents[3]
 SAMPLE = ROOT / "datasets" / "sample" / "padel_sample"

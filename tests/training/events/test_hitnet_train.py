@@ -12,9 +12,9 @@ import torch
 from inference.clipio import Clip, ClipInfo, HitEvents, Manifest, ManifestEntry
 from inference.events import ClassSet, EventDetector, UnmappedLabelError
 from inference.events.features import FeatureConfig
-from training.events.data import AugmentConfig, augment_batch
-from training.events.simulate import simulate_clip
-from training.events.tracknet import convert_tracknet_dataset
+from training.events.data.datamodule import AugmentConfig, augment_batch
+from training.events.synthetic.simulate import simulate_clip
+from training.events.data.tracknet import convert_tracknet_dataset
 from training.run import evaluate, train
 
 ROOT = Path(__file__).resolve().parents[3]

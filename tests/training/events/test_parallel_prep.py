@@ -1,4 +1,4 @@
-"""Per-clip data work in forked processes (training/events/parallel.py): the same data as in one process."""
+"""Per-clip data work in forked processes (training/events/data/parallel.py): the same data as in one process."""
 from __future__ import annotations
 
 import signal
@@ -6,10 +6,10 @@ import signal
 import numpy as np
 import pytest
 
-from training.events.data import EventDataModule
-from training.events.degrade import DegradeConfig, degrade_all
-from training.events.parallel import can_fork, clip_rngs, map_clips
-from training.events.simulate import simulate_clips
+from training.events.data.datamodule import EventDataModule
+from training.events.synthetic.degrade import DegradeConfig, degrade_all
+from training.events.data.parallel import can_fork, clip_rngs, map_clips
+from training.events.synthetic.simulate import simulate_clips
 
 pytestmark = pytest.mark.skipif(not can_fork(), reason="no fork on this platform: the work runs in one process")
 

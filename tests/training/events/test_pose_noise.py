@@ -1,4 +1,4 @@
-"""Pose-backend noise on the simulated players (training/events/pose_noise.py), the player block through the
+"""Pose-backend noise on the simulated players (training/events/synthetic/pose_noise.py), the player block through the
 augmentations, and the event data module with ``features.poses``."""
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import torch
 
 from inference.events import FeatureConfig
 from inference.events.features import PLAYER_COLUMNS
-from training.events.data import AugmentConfig, EventDataModule, augment_batch
-from training.events.pose_noise import PoseNoiseConfig, noisy_all, noisy_players
-from training.events.simulate import simulate_clip
+from training.events.data.datamodule import AugmentConfig, EventDataModule, augment_batch
+from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all, noisy_players
+from training.events.synthetic.simulate import simulate_clip
 
 COL = {n: i for i, n in enumerate(PLAYER_COLUMNS)}
 P = len(PLAYER_COLUMNS)

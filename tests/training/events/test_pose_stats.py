@@ -1,12 +1,12 @@
-"""Pose-backend statistics against the truth (training/events/pose_stats.py) and the settings they give."""
+"""Pose-backend statistics against the truth (training/events/stats/pose_stats.py) and the settings they give."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from training.events.pose_noise import PoseNoiseConfig, noisy_players
-from training.events.pose_stats import PoseClipTruth, measure_players, pose_noise_settings, refine_settings
-from training.events.simulate import simulate_clip
+from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_players
+from training.events.stats.pose_stats import PoseClipTruth, measure_players, pose_noise_settings, refine_settings
+from training.events.synthetic.simulate import simulate_clip
 
 
 @pytest.fixture(scope="module")

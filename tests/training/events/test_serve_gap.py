@@ -1,6 +1,6 @@
 """The far serve as a real broadcast tracker sees it (its toss lost against the crowd: a long gap, mostly
-before the contact), measured on tracks (training/events/real_stats.py) and reproduced by the degradation
-model (training/events/degrade.py), and a second tracker's look drawn per clip (``alternative``)."""
+before the contact), measured on tracks (training/events/stats/real_stats.py) and reproduced by the degradation
+model (training/events/synthetic/degrade.py), and a second tracker's look drawn per clip (``alternative``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,9 +8,9 @@ import pytest
 
 from inference.clipio import BallTrack, HitEvents
 from inference.events.gaps import gap_around
-from training.events.degrade import DegradeConfig, degrade, degrade_all
-from training.events.real_stats import degrade_from, measure
-from training.events.simulate import simulate_clip
+from training.events.synthetic.degrade import DegradeConfig, degrade, degrade_all
+from training.events.stats.real_stats import degrade_from, measure
+from training.events.synthetic.simulate import simulate_clip
 
 OFF = dict(p_clean=0.0, p_occlude_near=0.0, p_occlude_far=0.0, p_gap_event=0.0, miss_frac=0.0, outlier_frac=0.0,
            jitter_px=(0.0, 0.0), p_smooth=0.0)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from training.events.data import EventDataModule
+from training.events.data.datamodule import EventDataModule
 
 
 def test_tour_share_adds_tour_rallies_and_keeps_the_club_ones(tmp_path):

@@ -1,14 +1,14 @@
-"""Statistics of a detector's track against the truth (training/events/track_stats.py) on generated tracks
+"""Statistics of a detector's track against the truth (training/events/stats/track_stats.py) on generated tracks
 with known misses, wrong positions and jitter, the degradation settings made from them, and the
-degradation's misses drawn by the ball's image size (training/events/degrade.py ``miss_by_diameter``)."""
+degradation's misses drawn by the ball's image size (training/events/synthetic/degrade.py ``miss_by_diameter``)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from inference.clipio import BallTrack, HitEvents
-from training.events.degrade import DegradeConfig, ball_diameter_px, degrade
-from training.events.track_stats import ClipTruth, degrade_settings, measure_clips
+from training.events.synthetic.degrade import DegradeConfig, ball_diameter_px, degrade
+from training.events.stats.track_stats import ClipTruth, degrade_settings, measure_clips
 
 
 def _truth_and_detection(seed: int = 0):
@@ -68,7 +68,7 @@ def test_degrade_settings_reproduce_the_measured_rates():
 
 
 def test_degradation_misses_small_balls_more_when_told():
-    from training.events.simulate import simulate_clip
+    from training.events.synthetic.simulate import simulate_clip
 
     clips = [simulate_clip("tennis", 7100 + k) for k in range(3)]
     base = dict(p_clean=0.0, p_occlude_near=0.0, p_occlude_far=0.0, p_gap_event=0.0, miss_frac=0.3,

@@ -11,7 +11,7 @@ does (the tracker's coasts dropped, then the RTS smoother of :mod:`inference.det
   (``runs/tune_tracker/<dataset>_<sha>/clip_*.npz``) → candidates → tracker, for the val/test clips of
   ``DATASET`` (no network run).
 
-    python -m training.events.e2e --models inference/weights/hitnet_padel.pth.tar runs/robust.pth.tar \\
+    python -m training.events.studies.e2e --models inference/weights/hitnet_padel.pth.tar runs/robust.pth.tar \\
         --infer runs/x=datasets/sample/padel_sample \\
         --heatmaps runs/tune_tracker/synth_padel_b11a56f3b97f3932 --root data/synth_padel
 
@@ -35,12 +35,12 @@ from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
 from inference.events.metrics import EventCounts, format_event_table
 
-from .data import EventDataModule, WindowSet
-from .degrade import DegradeConfig, degrade_all
-from .evaluate import (TOLERANCE_NOTE, counts_for, detector_scorer, publish_tables, score_all,
+from training.events.data.datamodule import EventDataModule, WindowSet
+from training.events.synthetic.degrade import DegradeConfig, degrade_all
+from training.events.evaluate import (TOLERANCE_NOTE, counts_for, detector_scorer, publish_tables, score_all,
                        tune_decoder)
-from .rf import ForestScorer
-from .simulate import SimClip, perturb
+from training.events.models.rf import ForestScorer
+from training.events.synthetic.simulate import SimClip, perturb
 
 CLASS_SET = ClassSet.load("padel6")
 

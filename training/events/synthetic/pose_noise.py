@@ -21,8 +21,8 @@ import numpy as np
 
 from inference.clipio import PlayerTracks
 
-from .degrade import _pair, config_from_dict
-from .parallel import clip_rngs, map_clips
+from training.events.synthetic.degrade import _pair, config_from_dict
+from training.events.data.parallel import clip_rngs, map_clips
 
 
 @dataclass(frozen=True)
@@ -204,7 +204,7 @@ def _fill_gaps(p: PlayerTracks, fps: float, max_gap_s: float) -> PlayerTracks:
 def noisy_players(sim, rng: np.random.Generator, cfg: PoseNoiseConfig = PoseNoiseConfig()) -> PlayerTracks | None:
     """``sim.players`` (exact) as a pose backend and the players stage would give them (None: no players).
 
-    ``sim``: a :class:`~training.events.simulate.SimClip` (``players``, ``fps``, ``width``, ``height``).
+    ``sim``: a :class:`~training.events.synthetic.simulate.SimClip` (``players``, ``fps``, ``width``, ``height``).
     The kinds that default to off draw random numbers only when on, so older settings give the same players."""
     players = sim.players
     if players is None or len(players) == 0:
@@ -276,6 +276,6 @@ def noisy_players(sim, rng: np.random.Generator, cfg: PoseNoiseConfig = PoseNois
 
 def noisy_all(clips, seed: int, cfg: PoseNoiseConfig, workers: int = 0) -> list[PlayerTracks | None]:
     """Noisy players of many clips; the same seed gives the same players (``workers``: forked processes,
-    :func:`~training.events.parallel.map_clips`)."""
+    :func:`~training.events.data.parallel.map_clips`)."""
     rngs = clip_rngs(seed, len(clips))
     return map_clips(lambda k: noisy_players(clips[k], rngs[k], cfg), len(clips), workers)

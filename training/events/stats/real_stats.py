@@ -1,6 +1,6 @@
 """What a ball track does around its events, measured the same way on real tracks (a real tracker's output
 with hand-made event labels) and on simulated degraded ones, and the degradation settings
-(:class:`~training.events.degrade.DegradeConfig`) that reproduce the real figures.
+(:class:`~training.events.synthetic.degrade.DegradeConfig`) that reproduce the real figures.
 
 Per event class: the share of events whose frame (±1) has no ball (*hidden*), the lengths of those gaps
 (seconds) and where the event lies in them; elsewhere: the runs of misses (count per second, lengths) and

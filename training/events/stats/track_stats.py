@@ -1,5 +1,5 @@
 """What the project's own ball detector does to a track: statistics of a detected ``ball.csv`` against the
-clip's ground truth, and the degradation settings (:class:`~training.events.degrade.DegradeConfig`) that
+clip's ground truth, and the degradation settings (:class:`~training.events.synthetic.degrade.DegradeConfig`) that
 reproduce them.
 
 Measured per frame where the true ball is in the image: a *hit* is a detection within ``tau_px`` (pixels
@@ -173,7 +173,7 @@ def measure_clips(pairs: list[tuple[ClipTruth, BallTrack]], tau_px: float = 10.0
 
 
 def degrade_settings(stats: dict) -> dict:
-    """``data.degrade`` fields (:class:`~training.events.degrade.DegradeConfig`) that draw tracks with the
+    """``data.degrade`` fields (:class:`~training.events.synthetic.degrade.DegradeConfig`) that draw tracks with the
     measured figures: gaps at contacts with the measured rates, miss runs with the measured lengths and
     rate away from contacts, misses by the ball's image diameter, outliers at the measured rate and
     distances, the measured jitter and whole pixels."""

@@ -22,7 +22,7 @@ from inference.events.crop import CropConfig, CropHitNet
 from inference.events.detector import load_model_file
 from inference.events.features import FeatureConfig
 
-from .module import log_event_metrics
+from training.events.models.hitnet import log_event_metrics
 
 
 @dataclass(frozen=True)
@@ -100,13 +100,13 @@ def warm_start_head(net: CropHitNet, path: str) -> None:
 
 class CropHitNetModule(L.LightningModule):
     """Args:
-        class_set, features, window, last_k: as :class:`~training.events.module.HitNetModule`.
+        class_set, features, window, last_k: as :class:`~training.events.models.hitnet.HitNetModule`.
         crop: :class:`CropConfig` fields; embed, channels: the CNN. hidden, layers, bidirectional, dropout:
         the GRU head. lr, weight_decay, head_lr_scale: Adam. init_from: a HitNet model file to warm-start
         the head. augment: :class:`CropAugment` fields. neg_weight: loss weight of windows without an
         event (class balancing; events are ~10 % of windows).
 
-    Batches are chunks of consecutive windows (:class:`~training.events.crop_data.CropChunkSet`).
+    Batches are chunks of consecutive windows (:class:`~training.events.data.crop_data.CropChunkSet`).
     """
 
     def __init__(self, class_set: str | dict = "padel6", features: dict | None = None, crop: dict | None = None,

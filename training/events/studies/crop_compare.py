@@ -4,13 +4,13 @@ detector-like (the annotated track perturbed as in :func:`.simulate.perturb`, se
 the real detector (WASB probability maps cached by ``bench/tune_tracker.py`` under ``runs/tune_tracker``
 → candidates → our tracker, detections only).
 
-    .venv/bin/python -m training.events.crop_compare --crop inference/weights/hitnet_crop_padel.pth.tar \
+    .venv/bin/python -m training.events.studies.crop_compare --crop inference/weights/hitnet_crop_padel.pth.tar \
         --out runs/crop_compare.md
 
 Every model runs its runtime path (``EventDetector.ref_probs``; crop models stream the clip's frames and
 cut crops around the given track). Decoders: as stored in each model file, and for the ball-only HitNet
 also re-tuned on the same rendered validation clips the crop model was tuned on. The random forest is
-trained on simulated rallies (``--rf-train`` clips, as ``training.events.compare``).
+trained on simulated rallies (``--rf-train`` clips, as ``training.events.studies.compare``).
 """
 from __future__ import annotations
 
@@ -29,12 +29,12 @@ from inference.events.decode import DecodeParams
 from inference.events.detector import EventDetector
 from inference.events.metrics import format_event_table
 
-from .crop_run import frames_scorer
-from .data import clips_from_folder
-from .evaluate import TOLERANCE_NOTE, counts_for, publish_tables, score_all, tune_decoder
-from .simulate import SimClip, perturb
+from training.events.models.crop_run import frames_scorer
+from training.events.data.datamodule import clips_from_folder
+from training.events.evaluate import TOLERANCE_NOTE, counts_for, publish_tables, score_all, tune_decoder
+from training.events.synthetic.simulate import SimClip, perturb
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def detector_track(sim: SimClip, cache: Path) -> BallTrack | None:
@@ -92,8 +92,8 @@ def main(argv: list[str] | None = None) -> int:
                             tuned.decode_params, hit.ref_fps))
     class_set: ClassSet = hit.class_set
     if args.rf_train:
-        from .data import EventDataModule, WindowSet
-        from .rf import ForestScorer
+        from training.events.data.datamodule import EventDataModule, WindowSet
+        from training.events.models.rf import ForestScorer
 
         dm = EventDataModule(sport=class_set.sport, class_set=class_set.name, n_train=args.rf_train, n_val=100,
                              n_test=200, seed=1234, cache_dir=str(ROOT / "data" / "events_cache"),

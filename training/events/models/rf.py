@@ -10,8 +10,8 @@ from inference.clipio import BallTrack
 from inference.court import load_court
 from inference.events.features import FeatureConfig, clip_features, make_windows, window_probs_to_frames
 
-from .data import WindowSet
-from .simulate import SimClip
+from training.events.data.datamodule import WindowSet
+from training.events.synthetic.simulate import SimClip
 
 
 def window_table(x: np.ndarray) -> np.ndarray:

@@ -22,9 +22,9 @@ from inference.events.network import EventTagger
 from training.finetune import freeze as freeze_layers
 from training.finetune import trainable
 
-from .data import AugmentConfig
-from .module import EventSteps
-from .sequences import IGNORE, SequenceSet, frame_targets
+from training.events.data.datamodule import AugmentConfig
+from training.events.models.hitnet import EventSteps
+from training.events.data.sequences import IGNORE, SequenceSet, frame_targets
 
 __all__ = ["IGNORE", "SequenceSet", "TaggerModule", "frame_targets"]
 

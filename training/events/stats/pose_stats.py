@@ -1,6 +1,6 @@
 """What a pose backend and the players stage do to the players: statistics of a ``players.csv`` written by
 ``rally3d players`` (or ``infer``) against the clip's ground truth, and the pose-noise settings
-(:class:`~training.events.pose_noise.PoseNoiseConfig`) that reproduce them.
+(:class:`~training.events.synthetic.pose_noise.PoseNoiseConfig`) that reproduce them.
 
 Rows are matched per frame by court position (:func:`inference.players.evaluate.match_frames`, ≤ 1.5 m).
 Per side (near, far — the true player's team): the fraction of the true player-frames without a matched row
@@ -23,7 +23,7 @@ import numpy as np
 from inference.clipio import PlayerTracks
 from inference.players.evaluate import match_frames
 
-from .track_stats import run_lengths
+from training.events.stats.track_stats import run_lengths
 
 SIDES = ("near", "far")
 _WRISTS = (9, 10)
@@ -307,7 +307,7 @@ def _span(values: list[float], lo: float = 0.0) -> list[float]:
 
 
 def pose_noise_settings(stats: dict, fill_gap_s: float | None = None) -> dict:
-    """The :class:`~training.events.pose_noise.PoseNoiseConfig` fields that reproduce ``stats``
+    """The :class:`~training.events.synthetic.pose_noise.PoseNoiseConfig` fields that reproduce ``stats``
     (:func:`measure_players`): ranges span the near and far sides' figures (per-clip ones where measured).
 
     ``fill_gap_s``: the players stage's gap filling (default: ``TrackingConfig.max_gap_s``); measured misses

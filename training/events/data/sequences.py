@@ -1,5 +1,5 @@
 """The event tagger's examples: crops of whole labelled clips, every frame with a class
-(:class:`SequenceSet`), beside HitNet's windows (:class:`~training.events.data.WindowSet`).
+(:class:`SequenceSet`), beside HitNet's windows (:class:`~training.events.data.datamodule.WindowSet`).
 
 Example:
     >>> ds = SequenceSet(dm.labelled("train"), length=200, radius=1)
@@ -14,7 +14,7 @@ import torch
 from torch.utils.data import Dataset
 
 if TYPE_CHECKING:
-    from .data import LabelledClip
+    from training.events.data.datamodule import LabelledClip
 
 IGNORE = -100  # padding frames: no loss, no score
 

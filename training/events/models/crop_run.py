@@ -1,5 +1,5 @@
 """Hydra tasks of the crop hit-event model (``conf/experiment/hitnet_crop_padel.yaml``; dispatched from
-``training/run.py`` when the model is a :class:`~training.events.crop_module.CropHitNetModule`).
+``training/run.py`` when the model is a :class:`~training.events.models.crop.CropHitNetModule`).
 
 ``train_crop_events``: fit on balanced windows of rendered clips → calibrate the temperature on the
 validation windows → tune the decoder on the validation clips → export ``<output_dir>/hitnet_<sport>.pth.tar``
@@ -26,10 +26,10 @@ from inference.events.metrics import format_event_table
 from inference.models.checkpoint import read_checkpoint
 from training.common import resume_path, write_eval_results
 
-from .crop_data import CropEventDataModule
-from .run import table_rows, test_and_export
-from .evaluate import counts_for, fit_temperature, score_all, tune_decoder
-from .simulate import SimClip, perturb
+from training.events.data.crop_data import CropEventDataModule
+from training.events.run import table_rows, test_and_export
+from training.events.evaluate import counts_for, fit_temperature, score_all, tune_decoder
+from training.events.synthetic.simulate import SimClip, perturb
 
 log = logging.getLogger(__name__)
 

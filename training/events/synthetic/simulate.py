@@ -31,7 +31,7 @@ from synth.generate import DEFAULT_CAMERA
 from synth.groundtruth import event_table, inside_image
 from synth.rally import REAL_AROUND, default_config, simulate_rally
 
-from .parallel import can_fork, map_clips
+from training.events.data.parallel import can_fork, map_clips
 
 log = logging.getLogger(__name__)
 
@@ -150,8 +150,12 @@ def simulate_clips(sport: str, n: int, seed: int, cache_dir: str | Path | None =
         key = hashlib.sha1(json.dumps(parts).encode()).hexdigest()[:10]
         cache = Path(cache_dir) / f"sim_{sport}_{n}_{seed}_{key}.pkl"
         if cache.is_file():
-            with open(cache, "rb") as fh:
-                return pickle.load(fh)
+            try:
+                with open(cache, "rb") as fh:
+                    return pickle.load(fh)
+            except (ModuleNotFoundError, AttributeError, EOFError, pickle.UnpicklingError) as e:
+                # written by another version of the code (a class since moved) or cut short: simulate again
+                log.info("cache %s cannot be read (%s: %s): simulating again", cache, type(e).__name__, e)
     court = load_court(sport)
 
     def one(k: int) -> SimClip:

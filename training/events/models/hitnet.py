@@ -15,7 +15,7 @@ from training.distributed import all_reduce_sum, world
 from training.finetune import freeze as freeze_layers
 from training.finetune import trainable
 
-from .data import AugmentConfig, augment_batch
+from training.events.data.datamodule import AugmentConfig, augment_batch
 
 
 

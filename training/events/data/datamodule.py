@@ -27,10 +27,10 @@ from inference.events.classes import ClassSet
 from inference.events.features import (FeatureConfig, check_label_block, clip_features, make_windows, to_ref_frames,
                                        window_labels, window_starts)
 
-from .degrade import DegradeConfig, degrade_all
-from .parallel import clip_rngs, map_clips
-from .pose_noise import PoseNoiseConfig, noisy_all, noisy_players
-from .simulate import SimClip, simulate_clips
+from training.events.synthetic.degrade import DegradeConfig, degrade_all
+from training.events.data.parallel import clip_rngs, map_clips
+from training.events.synthetic.pose_noise import PoseNoiseConfig, noisy_all, noisy_players
+from training.events.synthetic.simulate import SimClip, simulate_clips
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ def ref_labels(sim: SimClip, class_set: ClassSet, features: FeatureConfig, n_ref
 def label_clips(clips: list[SimClip], class_set: ClassSet, features: FeatureConfig,
                 on_unmapped: str = "error", workers: int = 0) -> list[LabelledClip]:
     """Features (with each clip's ``players`` when ``features.poses``) and reference-rate labels
-    (``workers``: forked processes, :func:`~training.events.parallel.map_clips`)."""
+    (``workers``: forked processes, :func:`~training.events.data.parallel.map_clips`)."""
     court = load_court(class_set.sport) if class_set.sport else None
 
     def job(k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -336,14 +336,14 @@ class EventDataModule(L.LightningDataModule):
             ball after the point (not events: the model learns they are none).
         tour: share of the synthetic clips played at a tour final's pace (tennis: faster, flatter
             groundstrokes, :data:`synth.rally.TENNIS_TOUR`); the rest at the club pace.
-        degrade: :class:`~training.events.degrade.DegradeConfig` fields: train on detector-like tracks
+        degrade: :class:`~training.events.synthetic.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
-        pose_noise: :class:`~training.events.pose_noise.PoseNoiseConfig` fields: with ``features.poses``,
+        pose_noise: :class:`~training.events.synthetic.pose_noise.PoseNoiseConfig` fields: with ``features.poses``,
             the players as a pose backend gives them (misses, jitter, swaps; a new draw each epoch for
             training, a fixed one for val and test); None or ``enabled: false`` keeps them exact.
         sequence: 0 (HitNet's windows) or the crop length in reference frames of the event tagger's
-            examples (:class:`~training.events.sequences.SequenceSet`: ``sequence_repeats`` random crops per
+            examples (:class:`~training.events.data.sequences.SequenceSet`: ``sequence_repeats`` random crops per
             training clip and epoch, events spread over ± ``sequence_radius`` frames); ``batch_size`` then
             counts crops.
         prep_workers: forked processes for the per-clip data work (simulation, labelling, each epoch's new
@@ -512,7 +512,7 @@ class EventDataModule(L.LightningDataModule):
         """HitNet's windows, or the tagger's crops (:attr:`sequence`) of these clips."""
         if not self.sequence:
             return WindowSet(clips, self.window, self.last_k, self.lookahead)
-        from .sequences import SequenceSet
+        from training.events.data.sequences import SequenceSet
 
         return SequenceSet(clips, self.sequence, self.sequence_radius, random=split == "train",
                            repeats=self.sequence_repeats)

@@ -3,7 +3,7 @@ clips, with annotated and with detector-like ball positions, the random forest o
 HitNet model files given, and the physics-aware detector — each with its decoder tuned on the same
 validation clips.
 
-    python -m training.events.compare --sport padel --models inference/weights/hitnet_padel.pth.tar \
+    python -m training.events.studies.compare --sport padel --models inference/weights/hitnet_padel.pth.tar \
         --out docs/events_padel_table.md
 
 The clips are those of ``python train.py +experiment=hitnet_<sport>`` (same seeds and counts, read from
@@ -23,10 +23,10 @@ from inference.events.detector import EventDetector
 from inference.events.metrics import format_event_table
 from inference.events.physics import PhysicsParams
 
-from .data import EventDataModule, WindowSet
-from .evaluate import TOLERANCE_NOTE, counts_for, detector_scorer, publish_tables, score_all, tune_decoder
-from .rf import ForestScorer
-from .simulate import perturb
+from training.events.data.datamodule import EventDataModule, WindowSet
+from training.events.evaluate import TOLERANCE_NOTE, counts_for, detector_scorer, publish_tables, score_all, tune_decoder
+from training.events.models.rf import ForestScorer
+from training.events.synthetic.simulate import perturb
 
 
 def tuned_physics(dm: EventDataModule, val) -> EventDetector:

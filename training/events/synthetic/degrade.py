@@ -40,8 +40,8 @@ import numpy as np
 
 from inference.clipio import BallTrack
 
-from .parallel import clip_rngs, map_clips
-from .simulate import SimClip, every_frame
+from training.events.data.parallel import clip_rngs, map_clips
+from training.events.synthetic.simulate import SimClip, every_frame
 
 
 def _pair(name: str, v, lo: float = 0.0) -> tuple[float, float]:
@@ -78,7 +78,7 @@ class DegradeConfig:
             frame (lobs leaving it). All three are off by default (the default draws are unchanged).
         occlude_far_s: [min, max] length (s) of the gap around a far hit (None: half of ``occlude_s``); a
             real broadcast tracker loses the far player's hits for longer than the near one's
-            (``training.events.real_stats``).
+            (``training.events.stats.real_stats``).
         p_serve_gap_far: probability that the far player's serve (the hit at ``SimClip.rally[0]``) hides in a
             gap of ``serve_gap_s`` seconds of which a share drawn in ``serve_before`` lies before the contact:
             a broadcast tracker loses the far server's toss against the crowd (off by default).
@@ -349,6 +349,6 @@ def degrade(sim: SimClip, rng: np.random.Generator, cfg: DegradeConfig = Degrade
 
 def degrade_all(clips: list[SimClip], seed: int, cfg: DegradeConfig, workers: int = 0) -> list[BallTrack]:
     """Degraded tracks of many clips; the same seed gives the same tracks (``workers``: forked processes,
-    :func:`~training.events.parallel.map_clips`)."""
+    :func:`~training.events.data.parallel.map_clips`)."""
     rngs = clip_rngs(seed, len(clips))
     return map_clips(lambda k: degrade(clips[k], rngs[k], cfg).track, len(clips), workers)

@@ -28,10 +28,10 @@ from inference.events.classes import ClassSet
 from inference.events.crop import CropConfig, extract_crops
 from inference.events.features import FeatureConfig, dense_xy, resample_xy, window_labels, window_starts
 
-from .data import LabelledClip, clips_from_folder, label_clips
+from training.events.data.datamodule import LabelledClip, clips_from_folder, label_clips
 
 log = logging.getLogger(__name__)
-SAMPLE_ROOT = Path(__file__).resolve().parents[2] / "datasets" / "sample"
+SAMPLE_ROOT = Path(__file__).resolve().parents[3] / "datasets" / "sample"
 
 
 @dataclass
@@ -147,7 +147,7 @@ class CropEventDataModule(L.LightningDataModule):
 
     Args:
         sport, class_set, features, window, last_k, on_unmapped: as
-        :class:`~training.events.data.EventDataModule`. root: dataset folder (``manifest.yaml``).
+        :class:`~training.events.data.datamodule.EventDataModule`. root: dataset folder (``manifest.yaml``).
         crop: :class:`CropConfig` fields. chunk: windows per chunk (train chunks start every ``chunk // 3``
         windows, shuffled; validation chunks tile the clips); batch_size: chunks per batch.
         n_train, n_val, n_test: at most this many clips of each split

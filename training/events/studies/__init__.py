@@ -1,0 +1,1 @@
+"""Comparisons of the hit-event models behind the documentation's tables."""
