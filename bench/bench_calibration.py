@@ -19,7 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from inference.calibration import CalibrationError, calibrate_court
+from inference.camera.calibration import CalibrationError, calibrate_court
 from inference.camera import Camera
 from inference.court import load_court
 from synth.cameras import CameraSpec

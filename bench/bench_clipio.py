@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.calibration import calibrate_court
+from inference.camera.calibration import calibrate_court
 from inference.camera import Camera
 from inference.clipio import BallTrack, FrameSource, read_ball_csv, write_ball_csv, write_video
 from inference.court import load_court

@@ -98,7 +98,7 @@ def _compare_gt(clip, cam) -> None:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    from inference.calibration import calibrate_court, court_view_problems
+    from inference.camera.calibration import calibrate_court, court_view_problems
     from inference.clipio import Clip
 
     clip = Clip(args.clip)
@@ -310,7 +310,7 @@ def _table_readers(clip, n_frames: int | None, court, labels: Sequence[str] | No
         cam = clip.read_camera(gt=gt)
         clip.check_camera(cam, path)
         if court is not None:  # a camera that cannot see the court (focal ~0 px, under the floor, looking away)
-            from inference.calibration import require_court_view
+            from inference.camera.calibration import require_court_view
 
             require_court_view(cam, court, path)
         return cam

@@ -227,7 +227,7 @@ class LabelSession:
         self.ball_scores: dict[int, float] = {}  # frame → the detector's confidence (0..1) of its proposal
         self.interpolation_skipped: list[tuple[int, int, str]] = []  # (keyframe, keyframe, why) of the last run
         self.notices: list[str] = []
-        self.calibration = None  # inference.calibration.CalibrationResult of the current points
+        self.calibration = None  # inference.camera.calibration.CalibrationResult of the current points
         self.calibration_error: str = ""
         self.tables: dict[str, dict] = {t: {} for t in TABLES}
         self._base: dict[str, dict] = {t: {} for t in TABLES}
@@ -811,7 +811,7 @@ class LabelSession:
 
     def _recalibrate(self, *, write: bool) -> None:
         """Calibrate from the current points; write camera.yaml on success (when ``write``)."""
-        from inference.calibration import CalibrationError, calibrate_court
+        from inference.camera.calibration import CalibrationError, calibrate_court
 
         self.calibration, self.calibration_error = None, ""
         if not self.points:

@@ -23,7 +23,7 @@ from inference.clipio import (BallTrack, Clip, ClipInfo, Manifest, ManifestEntry
                               write_video)
 from inference.clipio.frames import write_frames_folder
 from inference.court import Court, load_court
-from inference.skeleton import COCO17
+from inference.players.skeleton import COCO17
 
 from .partial import PARTIAL, read_marker
 

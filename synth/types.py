@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from inference.skeleton import COCO17, COCO17_BONES  # noqa: F401  (re-exported for the generator)
+from inference.players.skeleton import COCO17, COCO17_BONES  # noqa: F401  (re-exported for the generator)
 
 
 @dataclass

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.skeleton import COCO17
+from inference.players.skeleton import COCO17
 
 from .csvtable import CsvTable, duplicated, format_floats, format_ints, write_csv
 from .tables import ArraysEqualMixin, as_matrix, as_strings, as_vector, check_frames

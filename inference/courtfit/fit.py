@@ -6,7 +6,7 @@
    homography of a camera that looks down on the floor (not an edge-on view of upright structure), scored
    on the line pixels;
 3. the best few: a camera from the homography's crossing points by the coplanar calibration
-   (:func:`inference.calibration.calibrate`: Zhang's constraints, then f, R, t), refined on the distances of
+   (:func:`inference.camera.calibration.calibrate`: Zhang's constraints, then f, R, t), refined on the distances of
    line pixels to the projected court lines (robust least squares; radial distortion k1, then k1 and k2,
    kept when they explain the lines clearly better), rescored;
 4. the gate: the fit is *accepted* only when enough of the visible court lines are found on line pixels
@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from inference.calibration import CalibrationError, CameraLayout, camera_layout, coplanar_camera
+from inference.camera.calibration import CalibrationError, CameraLayout, camera_layout, coplanar_camera
 from inference.camera import Camera
 from inference.court import Court
 from inference.masks import apply_mask, clip_mask

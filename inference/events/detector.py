@@ -378,7 +378,7 @@ class EventDetector:
             for d in (0, -1, 1, -2, 2):
                 k = frame + d
                 if 0 <= k < n_frames and np.isfinite(xy[k]).all():
-                    from inference.geometry import intersect_event
+                    from inference.court.geometry import intersect_event
 
                     o, v = camera.rays_normalized(xy[k][None])
                     hit = intersect_event(o, v, self.court, list(group), offset=self.court.ball.radius)

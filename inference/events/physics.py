@@ -61,7 +61,7 @@ def near_glass_reachable(camera, court, uv: np.ndarray) -> np.ndarray:
     extent (False without a camera or for a court without one)."""
     if camera is None or court is None or not court.planes_for("wall_near"):
         return np.zeros(len(uv), bool)
-    from inference.geometry import intersect_event
+    from inference.court.geometry import intersect_event
 
     ok = np.isfinite(uv).all(axis=1)
     out = np.zeros(len(uv), bool)

@@ -256,7 +256,7 @@ def _install_calibration(clip: Clip, camera: Path | None, court_points: Path | N
 
 
 def _install_camera(clip: Clip, path: Path, log=print) -> None:
-    from inference.calibration import require_court_view
+    from inference.camera.calibration import require_court_view
     from inference.court import load_court
 
     cam = Camera.load(path)  # clear FormatError on a malformed file

@@ -127,7 +127,7 @@ def _camera_inputs(ctx: Context) -> dict[str, Path | None]:
 
 
 def _camera_run(ctx: Context) -> Outcome:
-    from inference.calibration import calibrate_court, require_court_view
+    from inference.camera.calibration import calibrate_court, require_court_view
 
     clip = ctx.clip
     if ctx.given_camera():

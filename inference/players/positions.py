@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from inference.camera import Camera
-from inference.skeleton import JOINT
+from inference.players.skeleton import JOINT
 
 ANKLE_HEIGHT = 0.08  # m, λ: ankle joint above the floor
 MIN_SCORE = 0.3      # keypoints below this confidence are ignored

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from inference.skeleton import COCO17
+from inference.players.skeleton import COCO17
 
 J = len(COCO17)
 

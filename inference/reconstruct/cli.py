@@ -32,7 +32,7 @@ def run_reconstruct(args: argparse.Namespace) -> int:
     clip = Clip(args.clip)
     camera = clip.read_camera(gt=args.gt_camera)
     clip.check_camera(camera, clip.root / ("gt" if args.gt_camera else "") / "camera.yaml")
-    from inference.calibration import require_court_view
+    from inference.camera.calibration import require_court_view
     from inference.court import load_court
 
     require_court_view(camera, load_court(clip.court_path()), clip.root / ("gt" if args.gt_camera else "") / "camera.yaml")

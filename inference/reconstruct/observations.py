@@ -19,8 +19,8 @@ from inference.camera import Camera
 from inference.clipio import BallTrack, Clip, FormatError, HitEvents, PlayerTracks
 from inference.clipio.csvfiles import separate_same_frame
 from inference.court import Court, Plane, load_court
-from inference.geometry import intersect_planes
-from inference.skeleton import COCO17
+from inference.court.geometry import intersect_planes
+from inference.players.skeleton import COCO17
 
 PLAYER_EVENTS = ("player_near", "player_far")
 #: frames searched for a 2D ball around a surface contact when none is within 2 frames (the fit moves the

@@ -15,7 +15,7 @@ import numpy as np
 
 from inference.camera import Camera
 from inference.court import Court, Plane
-from inference.skeleton import COCO17_BONES
+from inference.players.skeleton import COCO17_BONES
 
 BALL_RGB = (200, 255, 0)
 FLOOR_RGB = {"padel": (30, 90, 200), "tennis": (50, 130, 80)}

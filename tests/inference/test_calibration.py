@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from inference.calibration import CalibrationError, calibrate, calibrate_court, dlt
+from inference.camera.calibration import CalibrationError, calibrate, calibrate_court, dlt
 from inference.camera import Camera
 from inference.court import load_court
 

@@ -7,7 +7,7 @@ import pytest
 from inference.camera import Camera, decompose_projection
 from inference.clipio.errors import FormatError
 from inference.court import load_court
-from inference.geometry import intersect_event, intersect_plane, intersect_planes
+from inference.court.geometry import intersect_event, intersect_plane, intersect_planes
 
 W, H = 1280, 720
 

@@ -10,7 +10,7 @@ from inference.clipio import FormatError, PlayerTracks, write_players_csv
 from inference.clipio.players import KP_COLUMNS
 from inference.players.importers import load_predictions, write_mmpose_json
 from inference.players.types import Persons, PoseSequence
-from inference.skeleton import JOINT
+from inference.players.skeleton import JOINT
 
 rng = np.random.default_rng(7)
 

@@ -16,7 +16,7 @@ from inference.players.backends import BackendUnavailable, decode_movenet, make_
 from inference.players.evaluate import DetectionNoise, score, simulate_detections
 from inference.players.positions import court_positions, foot_points
 from inference.players.tracking import players_from_poses
-from inference.skeleton import JOINT
+from inference.players.skeleton import JOINT
 
 SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
 W, H = 1280, 720

@@ -25,7 +25,7 @@ from tqdm import tqdm
 from inference.camera import Camera
 from inference.clipio import BallTrack, HitEvents, PlayerTracks, private_temp_path
 from inference.court import load_court
-from inference.skeleton import COCO17
+from inference.players.skeleton import COCO17
 from synth.cameras import CameraSpec
 from synth.generate import DEFAULT_CAMERA
 from synth.groundtruth import event_table, inside_image

@@ -24,7 +24,7 @@ from inference.clipio.errors import FormatError
 from inference.clipio.structured import load_yaml
 
 #: Where the court YAML files live: ``$RALLY3D_CONF/court`` or the repository's ``conf/court``.
-CONF_DIR = Path(os.environ.get("RALLY3D_CONF", Path(__file__).resolve().parent.parent / "conf"))
+CONF_DIR = Path(os.environ.get("RALLY3D_CONF", Path(__file__).resolve().parents[2] / "conf"))
 
 
 @dataclass(frozen=True)
