@@ -10,8 +10,9 @@ os.environ.setdefault("PROJECT_ROOT", str(Path(__file__).resolve().parent))
 
 @hydra.main(version_base="1.3", config_path="conf", config_name="eval")
 def main(cfg: DictConfig) -> None:
-    from training.preflight import check_data
+    from training.preflight import check_data, require_eval_weights
 
+    require_eval_weights(cfg)  # before the data: the default dataset takes minutes to make
     check_data(cfg)
     from training.run import evaluate
 

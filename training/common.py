@@ -21,6 +21,8 @@ import hydra
 import lightning as L
 from omegaconf import DictConfig, OmegaConf, open_dict
 
+from training.preflight import init_source  # noqa: F401 (re-exported: training.run and its callers name it here)
+
 log = logging.getLogger("training.run")
 
 
@@ -37,9 +39,6 @@ def progress_bar(cfg: DictConfig) -> bool:
     return sys.stderr.isatty() if setting in ("auto", None) else bool(setting)
 
 
-def init_source(cfg: DictConfig) -> str | None:
-    """The weights a run starts from: ``init_weights``, or its older spelling ``model.pretrained``."""
-    return cfg.get("init_weights") or (cfg.model.get("pretrained") if "model" in cfg else None) or None
 
 
 def apply_debug(cfg: DictConfig) -> DictConfig:

@@ -74,6 +74,27 @@ def data_roots(cfg) -> list[str]:
     return [str(root)] if isinstance(root, (str, Path)) else [str(r) for r in root]
 
 
+def init_source(cfg) -> str | None:
+    """The weights a run starts from: ``init_weights``, or its older spelling ``model.pretrained``."""
+    return cfg.get("init_weights") or (cfg.model.get("pretrained") if "model" in cfg else None) or None
+
+
+def require_eval_weights(cfg) -> None:
+    """A detector's evaluation needs a model file: say so before any data is checked or generated (the
+    default dataset takes minutes to make). Hit-event models evaluate the shipped file without one.
+
+    Raises:
+        ValueError: no ``ckpt_path`` (nor ``init_weights``); FileNotFoundError: the file is not there.
+    """
+    if cfg.get("task") == "events":
+        return
+    path = cfg.get("ckpt_path") or init_source(cfg)
+    if not path:
+        raise ValueError("eval needs ckpt_path=PATH: a model file or checkpoint (ours, Lightning or WASB-SBDT's)")
+    if not Path(str(path)).is_file():
+        raise FileNotFoundError(f"checkpoint {path} not found")
+
+
 def check_data(cfg, generate=None) -> list[str]:
     """Make sure every ``data.root`` exists and every clip of it can be read (see the module docstring);
     returns the roots generated."""

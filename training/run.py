@@ -20,7 +20,7 @@ from training.common import (  # noqa: F401 (shared with the hit-event tasks; na
     one_line_per_record, with_progress, build, init_detector, current_experiment, _experiment_of,
     find_last_checkpoint, resume_path, save_manifests, guarded_table, write_eval_results,
 )
-from training.preflight import check_data
+from training.preflight import check_data, require_eval_weights
 
 log = logging.getLogger(__name__)
 
@@ -107,6 +107,7 @@ def evaluate(cfg: DictConfig) -> dict[str, float]:
     max-score tracker, with frames/s, and a per-visibility table; writes every row to
     ``<output_dir>/results.{json,csv}``; returns the F1s. Hit-event models (``task: events``) print
     their event-set tables instead (training/events/run.py)."""
+    require_eval_weights(cfg)  # before the data: the default dataset takes minutes to make
     check_data(cfg)
     if cfg.get("task") == "events" and str(cfg.model.get("_target_", "")).endswith("CropHitNetModule"):
         from training.events.models.crop_run import evaluate_crop_events
@@ -191,11 +192,8 @@ def evaluate_detector(cfg: DictConfig) -> DetectorEval:
     from inference.detection.tracker import max_score_track
     from training.datasets import ball_input
 
+    require_eval_weights(cfg)
     path = cfg.get("ckpt_path") or init_source(cfg)
-    if not path:
-        raise ValueError("eval needs ckpt_path=PATH: a model file or checkpoint (ours, Lightning or WASB-SBDT's)")
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"checkpoint {path} not found")
     runner = BallDetectorRunner.from_weights(cfg.model.net.name, path, trust=bool(cfg.get("trust_checkpoint", False)),
                                              step=int(cfg.get("step") or cfg.model.net.frames_in),
                                              batch_size=int(cfg.get("batch_size") or 4), device=eval_device(cfg))

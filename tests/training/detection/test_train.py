@@ -80,9 +80,16 @@ def test_missing_dataset_is_a_clear_error(tmp_path):
 
 
 def test_eval_needs_a_checkpoint(tmp_path):
-    cfg = compose_cfg(["+experiment=wasb_padel"], tmp_path, name="eval")
+    """Said before any data is looked at: the default dataset (missing on a fresh clone) is not generated
+    first (that took ~4 minutes before the error came)."""
+    data = tmp_path / "data"
+    cfg = compose_cfg(["+experiment=wasb_padel", f"paths.data_dir={data}"], tmp_path, name="eval")
     with pytest.raises(ValueError, match="ckpt_path"):
         evaluate(cfg)
+    with pytest.raises(FileNotFoundError, match="not found"):
+        evaluate(compose_cfg(["+experiment=wasb_padel", f"paths.data_dir={data}", f"ckpt_path={tmp_path / 'x.pt'}"],
+                             tmp_path, name="eval"))
+    assert not data.exists()
 
 
 def test_plus_experiment_spelling_from_the_command_line(tiny, tmp_path):
