@@ -1,7 +1,7 @@
 """Names that cannot be confused (issue 43): the stretch of a broadcast between two editor's cuts is a *scene*
-(``inference/scenes.py``, ``scenes.json``); a *shot* is a player's, from a racket hit to the next
+(``inference/video/scenes.py``, ``scenes.json``); a *shot* is a player's, from a racket hit to the next
 (``labeler/review/shots.py``, the review's ``shots.csv``). The camera sense's former file name, ``shots.json``,
-is read only by the compatibility reader of old clip folders (:func:`inference.scenes.scenes_file`)."""
+is read only by the compatibility reader of old clip folders (:func:`inference.video.scenes.scenes_file`)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -21,7 +21,7 @@ def test_only_the_compat_reader_names_the_old_scenes_file():
     assert str(COMPAT_READER.relative_to(ROOT)) in found  # the check looks where the file is named
     others = [p for p in found if ROOT / p != COMPAT_READER]
     assert not others, (f"{others} name {OLD_FILE}: the camera's stretches between cuts are scenes (scenes.json, "
-                        "inference.scenes.scenes_file reads an old folder's file); a shot is a player's")
+                        "inference.video.scenes.scenes_file reads an old folder's file); a shot is a player's")
 
 
 def test_the_check_finds_a_mention(tmp_path):
@@ -33,7 +33,7 @@ def test_the_check_finds_a_mention(tmp_path):
 
 
 def test_no_camera_shots_module():
-    """The camera module is inference.scenes; no module or import by the old names comes back."""
+    """The camera module is inference.video.scenes; no module or import by the old names comes back."""
     assert not (ROOT / "inference" / "shots.py").exists()
     assert not (ROOT / "inference" / "pipeline" / "per_shot.py").exists()
     for package in ("inference", "labeler", "training", "bench", "tests"):

@@ -124,7 +124,7 @@ def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
                   max_shift_px: float = 24.0) -> DriftReport:
     """Sample a frame every ``every_s`` seconds of ``clip`` (:class:`inference.clipio.Clip`) and measure its
     shift against ``camera``'s projected court lines (see the module docstring)."""
-    from inference.masks import apply_mask, clip_mask
+    from inference.video.masks import apply_mask, clip_mask
 
     fps = clip.info.fps
     n = clip.n_frames

@@ -42,7 +42,7 @@ from scipy.optimize import least_squares
 from inference.camera.calibration import CalibrationError, CameraLayout, camera_layout, coplanar_camera
 from inference.camera import Camera
 from inference.court import Court
-from inference.masks import apply_mask, clip_mask
+from inference.video.masks import apply_mask, clip_mask
 
 from .lines import LineEvidence, background, line_mask, working_scale
 from .model import CourtLines, court_lines

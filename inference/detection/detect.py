@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from inference.clipio import BallTrack, Clip, FormatError
-from inference.masks import apply_mask, clip_mask
+from inference.video.masks import apply_mask, clip_mask
 from inference.models.checkpoint import load_detector
 from inference.models.fuse import fold_batchnorm
 
@@ -287,12 +287,12 @@ class BallDetectorRunner:
 
         With ``tolerate_truncation`` a video that stops decoding early yields the frames before the damage
         (``result.truncated`` says why) instead of raising :class:`FormatError`. ``active`` (N,) bool: only
-        these frames are searched (court-view scenes, :mod:`inference.scenes`); each run of active frames is
+        these frames are searched (court-view scenes, :mod:`inference.video.scenes`); each run of active frames is
         windowed and tracked on its own, the other frames have no candidates and no ball.
         """
         from tqdm import tqdm
 
-        from inference.scenes import segments
+        from inference.video.scenes import segments
 
         t0 = time.perf_counter()
         info = clip.info

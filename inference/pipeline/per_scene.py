@@ -2,7 +2,7 @@
 
 Across a cut the time is not continuous (a replay or a close-up sits between two court views), so each
 court-view scene is handled as a clip of its own — its ball track, events and players cut out and renumbered
-from 0 (:func:`inference.scenes.scene_rows`) — and the results are put back at the scene's frames. Frames
+from 0 (:func:`inference.video.scenes.scene_rows`) — and the results are put back at the scene's frames. Frames
 outside court views get no events and no 3D (segments.json's ``scenes`` says why).
 
 Example:
@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 
 from inference.clipio import BallTrack, HitEvents
-from inference.scenes import scene_rows
+from inference.video.scenes import scene_rows
 
 #: segments.json's reason for frames outside the court views
 LEFT_OUT = "not reconstructed: outside a court view (a replay, close-up or other camera; scenes.json)"

@@ -204,7 +204,7 @@ def request_auto_mask(clip: Clip, log=print) -> Clip:
     """Put ``mask: auto`` into ``clip``'s clip.yaml (``infer --mask auto``); the previous clip.yaml is kept
     in ``.rally3d/backup/``. Rectangles already there win (a user's mask is never replaced)."""
     from inference.clipio import write_clip_yaml
-    from inference.masks import AUTO
+    from inference.video.masks import AUTO
 
     mask = clip.info.extra.get("mask")
     if mask == AUTO:

@@ -184,7 +184,7 @@ def _camera_outputs(ctx: Context) -> list[Path]:
 # ------------------------------------------------------------------------------------------- scenes
 def _scenes_run(ctx: Context) -> Outcome:
     from inference.clipio import FormatError
-    from inference.scenes import LEGACY_FILE, Scene, SceneReport, find_scenes
+    from inference.video.scenes import LEGACY_FILE, Scene, SceneReport, find_scenes
 
     clip = ctx.clip
     # a folder from before scenes.json had its name: its old file is replaced, unless made by hand (kept, as
@@ -211,22 +211,22 @@ def _scenes_run(ctx: Context) -> Outcome:
 
 def _scenes_output(ctx: Context) -> Path:
     """scenes.json, what the scenes stage writes."""
-    from inference.scenes import SCENES_FILE
+    from inference.video.scenes import SCENES_FILE
 
     return ctx.clip.root / SCENES_FILE
 
 
 def _scenes_path(ctx: Context) -> Path:
     """The scenes file the later stages read: scenes.json (in a folder from before that name, with only the
-    old file, that one: :func:`inference.scenes.scenes_file`)."""
-    from inference.scenes import scenes_file
+    old file, that one: :func:`inference.video.scenes.scenes_file`)."""
+    from inference.video.scenes import scenes_file
 
     return scenes_file(ctx.clip.root)
 
 
 def _court_frames(ctx: Context) -> np.ndarray | None:
     """(N,) bool court-view frames from scenes.json (None: no scenes.json, every frame is processed)."""
-    from inference.scenes import SceneReport
+    from inference.video.scenes import SceneReport
 
     if not _scenes_path(ctx).is_file():
         return None
@@ -240,7 +240,7 @@ def _court_frames(ctx: Context) -> np.ndarray | None:
 def _cut_frames(ctx: Context) -> list[int]:
     """The first frame of every scene after the first (scenes.json; [] without it): no flight is smoothed
     across a cut."""
-    from inference.scenes import SceneReport
+    from inference.video.scenes import SceneReport
 
     if _court_frames(ctx) is None:
         return []
@@ -250,7 +250,7 @@ def _cut_frames(ctx: Context) -> list[int]:
 def _court_spans(ctx: Context) -> list[tuple[int, int]] | None:
     """The court-view scenes ``[(start, stop), ...]`` that the events and 3D stages handle one by one (None: no
     scenes.json or a single view of the whole clip — the clip is handled whole, as without scenes)."""
-    from inference.scenes import SceneReport
+    from inference.video.scenes import SceneReport
 
     if _court_frames(ctx) is None:
         return None

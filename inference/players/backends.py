@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from inference.scenes import segments
+from inference.video.scenes import segments
 
 from .types import J, Persons, PoseSequence
 

@@ -289,7 +289,7 @@ def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: flo
                        active: np.ndarray | None = None) -> PlayerTracks:
     """The whole pipeline: track → stitch → select per side → interpolate gaps → players.csv table.
 
-    ``active`` (N,) bool: the frames to use (court-view scenes, :mod:`inference.scenes`); the poses of the other
+    ``active`` (N,) bool: the frames to use (court-view scenes, :mod:`inference.video.scenes`); the poses of the other
     frames are ignored and no row is written there — no gap is filled and no position smoothed across them.
     """
     cfg = config or TrackingConfig()
@@ -320,7 +320,7 @@ def take_frames(t: Track, keep: np.ndarray) -> Track:
 
 def _smooth_within(t: Track, active: np.ndarray, fps: float, cfg: TrackingConfig) -> Track:
     """``t`` cut to the ``active`` frames, its court positions smoothed within each run of them."""
-    from inference.scenes import segments
+    from inference.video.scenes import segments
 
     pieces = [take_frames(t, (t.frames >= a) & (t.frames < b)) for a, b in segments(active)]
     pieces = [smooth_court(p, fps, cfg) for p in pieces if len(p)]

@@ -16,7 +16,7 @@ from inference.cli import main
 from inference.clipio import Clip, FrameSource, write_video
 from inference.court import load_court
 from inference.courtfit.drift import court_line_samples
-from inference.masks import AUTO_FILE, AUTO_PREVIEW, clip_mask
+from inference.video.masks import AUTO_FILE, AUTO_PREVIEW, clip_mask
 from inference.pipeline.prepare import request_auto_mask
 
 SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample" / "padel_sample"

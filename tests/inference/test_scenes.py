@@ -15,7 +15,7 @@ import pytest
 from inference.camera import Camera
 from inference.clipio import Clip, FormatError, FrameSource, write_video
 from inference.court import load_court
-from inference.scenes import LEGACY_FILE, Scene, SceneReport, find_scenes, scenes_file
+from inference.video.scenes import LEGACY_FILE, Scene, SceneReport, find_scenes, scenes_file
 
 SAMPLE = Path(__file__).resolve().parents[2] / "datasets" / "sample"
 CLOSEUP, OTHER = (80, 120), (160, 190)  # frames replaced by a close-up and by another camera
@@ -301,7 +301,7 @@ def test_one_scene_clip_reconstructs_as_without_scenes(tmp_path, spliced):
 def test_scene_frames_and_rows_renumber_a_scene_from_zero(spliced):
     """What a crop event model and the per-scene stages read of scene 120–159: its own frames and rows from 0."""
     from inference.pipeline.per_scene import SceneFrames
-    from inference.scenes import scene_rows
+    from inference.video.scenes import scene_rows
 
     with spliced.frames(cache_size=0) as src:
         scene = SceneFrames(src, 120, 160)

@@ -148,7 +148,7 @@ def test_auto_mask_hides_a_burnt_in_scoreboard_from_the_detector(tmp_path):
     import cv2
 
     from inference.clipio import BallTrack, ClipInfo, write_video
-    from inference.masks import clip_mask
+    from inference.video.masks import clip_mask
 
     n, box = 60, (20, 15, 190, 60)
     clip = Clip.create(tmp_path / "board", ClipInfo(sport="padel", fps=30.0, width=640, height=360, video="video.mp4",

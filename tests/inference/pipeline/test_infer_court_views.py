@@ -82,7 +82,7 @@ def test_no_player_ball_event_or_3d_in_a_close_up(rally, tmp_path, monkeypatch):
     import inference.players.backends as backends
     from inference.pipeline.run import run_pipeline
     from inference.pipeline.stages import PipelineConfig
-    from inference.scenes import Scene, SceneReport
+    from inference.video.scenes import Scene, SceneReport
 
     root = tmp_path / "clip"
     shutil.copytree(rally, root)

@@ -181,7 +181,7 @@ def find_scenes(clip, camera=None, court=None, *, frames: Iterable[np.ndarray] |
         frames: the clip's frames in order (default: decoded from the clip); masked regions (clip.yaml
             ``mask``) are filled before anything is measured.
     """
-    from inference.masks import apply_mask, clip_mask
+    from inference.video.masks import apply_mask, clip_mask
 
     rects = clip_mask(clip)
     fps = clip.info.fps
@@ -216,7 +216,7 @@ def find_scenes(clip, camera=None, court=None, *, frames: Iterable[np.ndarray] |
 
 def _by_court_lines(clip, spans, camera, court, rects) -> list[Scene]:
     from inference.courtfit.drift import court_line_samples, frame_shift
-    from inference.masks import apply_mask
+    from inference.video.masks import apply_mask
 
     samples = court_line_samples(camera, court)
     support = []
