@@ -346,6 +346,16 @@ def _free_ends_of(fit: ChainFit) -> set[bool]:
     return {bool(f.lead_in) for f in fit.problem.chain.flights if f.end is None}
 
 
+def _free_end_reason(obs: Observations, seg: Segment) -> str:
+    """Why a lead-in or run-out has no 3D: no 2D ball beyond its event, or a track there that is not one
+    flight from the event."""
+    beyond = obs.uv[:seg.end] if seg.index == -1 else obs.uv[seg.start + 1:]
+    if not np.isfinite(beyond).all(axis=1).any():
+        return "no 2D track beyond the event"
+    return ("the 2D track beyond the event is not one flight from it (a bounce or hit the events missed, or the "
+            "tracker on something else)")
+
+
 #: 2D points a free end fitted again over a shorter stretch needs (a few frames right at the contact are no
 #: evidence of the flight: on a real clip three such frames gave an 18 km/h "groundstroke")
 MIN_RECOVERED_FREE_END = 6
@@ -567,7 +577,7 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             lo, hi = seg.start, seg.end
         m = (frames >= lo) & (frames <= hi)
         if not m.any() or (seg.index in (-1, E - 1) and m.sum() < 2):
-            out.append(SegmentFit.failed(seg, "no 2D track beyond the event" if seg.index in (-1, E - 1)
+            out.append(SegmentFit.failed(seg, _free_end_reason(obs, seg) if seg.index in (-1, E - 1)
                                          else "outside the fitted rally"))
             continue
         failing = np.array([not checks[s].ok for s in own[m]])

@@ -196,3 +196,22 @@ def test_a_single_event_clip_gets_its_run_out_and_is_not_called_plausible():
     p = fit.extra["plausibility"]
     assert not p["plausible"] and p["covered_share"] < 0.5
     assert any("single event" in why for why in p["not_plausible_because"])
+
+
+def test_a_run_out_is_not_rebuilt_from_three_frames_at_the_contact():
+    """The same clip with the ball lost from 3 frames after the hit for a second (the tracker jumped to
+    something else): three points right at the contact are no evidence of the shot, so no run-out is made
+    of them (one was: an 18 km/h "groundstroke" on a real clip)."""
+    from dataclasses import replace
+
+    clip = Clip(SAMPLE / "tennis_sample")
+    obs, _, _ = prepare(clip, Setting(noise_px=1.0))
+    keep = obs.event_frames == 72
+    uv = obs.uv.copy()
+    uv[76:110] = np.nan
+    obs = replace(obs, uv=uv, event_frames=obs.event_frames[keep],
+                  event_labels=[lab for lab, k in zip(obs.event_labels, keep) if k])
+    fit = fit_joint(obs)
+    run_out = [s for s in fit.segments if s.segment.start_event == "player_far" and s.segment.end_event is None]
+    assert not run_out or not run_out[0].ok or len(run_out[0].frames) >= 6, [(s.segment, s.reason) for s in run_out]
+    assert not fit.extra["plausibility"]["plausible"]
