@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{clip.root.name}: {model}; {len(result.events)} events {counts}; "
           f"{rally_summary(result.rally, info.fps, result.outside.event, not args.rally_only)}; wrote {path} "
           f"and {rally_path}")
-    unsure = result.unsure()
+    unsure = result.unsure_all(info.fps)
     if unsure:
         print(f"check: {unsure} (events.csv's confidence column)")
     return 0

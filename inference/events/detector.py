@@ -90,6 +90,7 @@ class EventResult:
     outside: HitEvents = field(default_factory=HitEvents.empty)
     uncertainty: np.ndarray = field(default_factory=lambda: np.zeros(0))
     confidence: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    quiet: tuple[tuple[int, int], ...] = ()
 
     def events_with_timing(self) -> HitEvents:
         """``events`` with two more columns for ``events.csv`` (docs/formats.md §9): ``confidence`` and
@@ -114,6 +115,31 @@ class EventResult:
         items = ", ".join(f"{self.events.event[k]} {int(self.events.frame[k])} ({c[k]:.2f})" for k in low[:8])
         more = f", +{len(low) - 8} more" if len(low) > 8 else ""
         return f"{len(low)} event{'s' if len(low) > 1 else ''} below {below:g} confidence: {items}{more}"
+
+    def unsure_all(self, fps: float, below: float = UNSURE_BELOW) -> str:
+        """:meth:`unsure` and the :attr:`quiet` stretches: ``"no event for 3.1 s between frames 40 and 133
+        while the ball was seen (a missed hit or bounce?)"`` ("" when nothing to check)."""
+        parts = [self.unsure(below)] + [
+            f"no event for {(b - a) / fps:.1f} s between frames {a} and {b} while the ball was seen (a missed hit "
+            "or bounce?)" for a, b in self.quiet]
+        return "; ".join(p for p in parts if p)
+
+
+#: two consecutive events further apart than this while the ball is seen: a stretch to check (the longest
+#: flights, a padel lob or a tennis lob with its bounce, take about 2.5 s)
+QUIET_S = 2.5
+
+
+def quiet_stretches(frames: np.ndarray, seen: np.ndarray, fps: float, longest_s: float = QUIET_S,
+                    min_seen: float = 0.5) -> tuple[tuple[int, int], ...]:
+    """``(a, b)`` pairs of consecutive event frames more than ``longest_s`` apart with the ball seen in at least
+    ``min_seen`` of the frames between them: a hit or a bounce the model missed, most likely."""
+    f = np.sort(np.asarray(frames, np.int64))
+    out = []
+    for a, b in zip(f[:-1], f[1:]):
+        if (b - a) / fps > longest_s and np.mean(seen[a + 1:b]) >= min_seen:
+            out.append((int(a), int(b)))
+    return tuple(out)
 
 
 def ball_only_weights(sport: str) -> Path:
@@ -352,7 +378,8 @@ class EventDetector:
             events = HitEvents(events.frame[seg.inside], events.event[seg.inside])
             coarse = tuple(c for c, k in zip(coarse, seg.inside) if k)
             sigma, conf = sigma[seg.inside], conf[seg.inside]
-        return EventResult(events, probs, self.class_set.classes, coarse, seg, outside, sigma, conf)
+        quiet = quiet_stretches(events.frame, np.isfinite(xy).all(axis=1), fps)
+        return EventResult(events, probs, self.class_set.classes, coarse, seg, outside, sigma, conf, quiet)
 
     # ------------------------------------------------------------------------------ fine labels
     def _fine_events(self, frames: np.ndarray, cls: np.ndarray, ball: BallTrack, n_frames: int,

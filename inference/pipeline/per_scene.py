@@ -55,7 +55,7 @@ def events_per_scene(det, ball: BallTrack, spans: list[tuple[int, int]], n_frame
     C = det.class_set.n
     probs = np.zeros((n_frames, C))
     probs[:, 0] = 1.0
-    ev_f, ev_l, coarse, sigma, conf = [], [], [], [], []
+    ev_f, ev_l, coarse, sigma, conf, quiets = [], [], [], [], [], []
     for a, b in spans:
         sub = scene_rows(ball, a, b)
         if not np.any(sub.visibility > 0):  # no ball in this view: nothing to decode
@@ -69,6 +69,7 @@ def events_per_scene(det, ball: BallTrack, spans: list[tuple[int, int]], n_frame
         coarse += list(r.coarse)
         sigma.append(r.uncertainty)
         conf.append(r.confidence)
+        quiets.append(tuple((qa + a, qb + a) for qa, qb in r.quiet))
     frame = np.concatenate(ev_f).astype(np.int64) if ev_f else np.zeros(0, np.int64)
     label = np.concatenate(ev_l) if ev_l else np.zeros(0, str)
     unc = np.concatenate(sigma) if sigma else np.zeros(0)
@@ -82,8 +83,9 @@ def events_per_scene(det, ball: BallTrack, spans: list[tuple[int, int]], n_frame
                         params=det.rally_params())
     outside = HitEvents(frame[~seg.inside], label[~seg.inside])
     keep = np.ones(len(frame), bool) if keep_all else seg.inside
+    quiet = tuple(q for r in quiets for q in r)
     return EventResult(HitEvents(frame[keep], label[keep]), probs, det.class_set.classes,
-                       tuple(c for c, k in zip(coarse, keep) if k), seg, outside, unc[keep], cf[keep])
+                       tuple(c for c, k in zip(coarse, keep) if k), seg, outside, unc[keep], cf[keep], quiet)
 
 
 def reconstruct_per_scene(obs, spans: list[tuple[int, int]], method: str, n_frames: int | None = None):

@@ -368,7 +368,7 @@ def _events_run(ctx: Context) -> Outcome:
         else "ball only"
     rally = f"; {rally_summary(result.rally, clip.info.fps, result.outside.event, not ctx.cfg.rally_only)}" \
         if result.rally is not None else ""
-    unsure = result.unsure()
+    unsure = result.unsure_all(clip.info.fps)
     return Outcome(clip.n_frames, f"{len(result.events)} events (" +
                    ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + f"; {model})" +
                    (f" in {len(spans)} court-view scenes" if spans is not None else "") + rally +

@@ -168,3 +168,21 @@ def test_events_csv_carries_confidence_and_timing_and_reads_back(clips, tmp_path
     assert np.array_equal(back.frame, r.events.frame) and np.array_equal(back.event, r.events.event)
     assert np.allclose(back.extra["confidence"].astype(float), r.confidence, atol=0.006)
     assert np.allclose(back.extra["sigma_frames"].astype(float), r.uncertainty, atol=0.006)
+
+
+def test_a_long_stretch_without_events_is_reported_to_check():
+    """Two consecutive events 4 s apart with the ball seen between them (the model missed a hit or a bounce)
+    are named among the things to check; a gap in which the ball is mostly unseen, or a short one, is not."""
+    from inference.events.detector import QUIET_S, EventResult, quiet_stretches
+
+    fps = 25.0
+    seen = np.ones(400, bool)
+    seen[250:330] = False  # the ball out of the picture for 3.2 s
+    frames = np.array([10, 40, 140, 190, 335])
+    assert quiet_stretches(frames, seen, fps) == ((40, 140),)
+    assert (140 - 40) / fps > QUIET_S > (190 - 140) / fps
+    r = EventResult(HitEvents(frames, ["player_near", "ground", "player_far", "ground", "player_near"]),
+                    np.zeros((400, 4)), ("none", "ground", "player_near", "player_far"),
+                    confidence=np.array([0.9, 0.9, 0.3, 0.9, 0.9]), quiet=quiet_stretches(frames, seen, fps))
+    text = r.unsure_all(fps)
+    assert "player_far 140 (0.30)" in text and "no event for 4.0 s between frames 40 and 140" in text
