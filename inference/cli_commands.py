@@ -112,12 +112,16 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.auto:
         return run_auto_calibrate(args, clip, court)
     points = clip.read_court_points(known_names=court.point_names)
+    lines = clip.read_court_line_points(known_names=court.point_names, missing_ok=True)
     size = np.array([clip.info.width, clip.info.height], dtype=float)
     image_points = {n: xy * size for n, xy in zip(points.names, points.xy)}
+    line_points = [(a, b, xy * size) for a, b, xy in zip(lines.start, lines.end, lines.xy)]
     result = calibrate_court(court, image_points, (clip.info.width, clip.info.height),
-                             model=args.model, n_dist=args.distortion)
+                             model=args.model, n_dist=args.distortion, line_points=line_points)
     cam = result.camera
-    print(f"court {court.name}, {len(result.names)} points, model {args.model}")
+    along = f" + {len(line_points)} along court lines ({clip.court_line_points_path.name})" if line_points else ""
+    print(f"court {court.name}, {len(result.names)} points{along}, model {args.model}"
+          + (f", lens k1 {cam.dist[0]:+.3f}" if args.distortion and cam.dist is not None else ""))
     print(result.table())
     print(f"camera centre (m): {np.array2string(cam.centre, precision=3)}   "
           f"focal (px): {cam.K[0, 0]:.1f}, {cam.K[1, 1]:.1f}")
@@ -320,6 +324,7 @@ def _table_readers(clip, n_frames: int | None, court, labels: Sequence[str] | No
         "inactive_balls.csv": lambda: clip.read_inactive_balls(n_frames=n_frames),
         "events.csv": lambda: clip.read_events(n_frames=n_frames, labels=labels),
         "court_points.csv": lambda: clip.read_court_points(known_names=points),
+        "court_line_points.csv": lambda: clip.read_court_line_points(known_names=points),
         "camera.yaml": camera,
         "ball_3d.csv": lambda: clip.read_ball_3d(n_frames=n_frames),
         "players.csv": lambda: clip.read_players(n_frames=n_frames),

@@ -275,17 +275,57 @@ class CameraLayout:
         i = self.n_f + (2 if self.free_pp else 0)
         return -Rotation.from_rotvec(p[i : i + 3]).as_matrix().T @ p[i + 3 : i + 6]
 
-    def residuals(self, p: np.ndarray, world: np.ndarray, image: np.ndarray) -> np.ndarray:
+    def project(self, p: np.ndarray, world: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels of (N, 3) court points under the parameters ``p`` (lens distortion included)."""
         K, R, t, dist = self.unpack(p)
         Xc = world @ R.T + t
         z = Xc[:, 2:3]
         xn = Xc[:, :2] / np.where(np.abs(z) < 1e-9, 1e-9, z)
         if self.n_dist:
             xn = distort_normalized(xn, dist)
-        r = (xn @ K[:2, :2].T + K[:2, 2] - image).ravel()
+        return xn @ K[:2, :2].T + K[:2, 2]
+
+    def residuals(self, p: np.ndarray, world: np.ndarray, image: np.ndarray,
+                  lines: LineClicks | None = None) -> np.ndarray:
+        K = self.unpack(p)[0]
+        r = (self.project(p, world) - image).ravel()
+        if lines is not None and len(lines):
+            r = np.concatenate([r, lines.residuals(lambda X: self.project(p, X))])
         if self.free_pp and self.pp_weight > 0:
             r = np.concatenate([r, self.pp_weight * (K[:2, 2] - np.asarray(self.centre))])
         return r
+
+
+#: a click along a court line farther than this from the line as the calibrated camera draws it is flagged
+LINE_CLICK_OFF_PX = 8.0
+
+
+@dataclass(frozen=True)
+class LineClicks:
+    """Pixels clicked somewhere along straight court lines (a bent side line under a wide-angle lens).
+
+    Attributes:
+        start, end: (M, 3) court points at the two ends of each click's line; xy: (M, 2) its pixel.
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    xy: np.ndarray
+    samples: int = 96
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    def residuals(self, project) -> np.ndarray:
+        """(M,) pixel distance of each click from its line as ``project`` draws it (a polyline of ``samples``
+        points, so the lens bends it)."""
+        s = np.linspace(-0.1, 1.1, self.samples)  # a little beyond the ends: a click on the line's tip
+        M, S = len(self.xy), len(s)
+        world = self.start[:, None, :] + s[None, :, None] * (self.end - self.start)[:, None, :]  # (M, S, 3)
+        poly = project(world.reshape(-1, 3)).reshape(M, S, 2)
+        seg, d = poly[:, 1:] - poly[:, :-1], self.xy[:, None, :] - poly[:, :-1]  # (M, S - 1, 2)
+        u = np.clip(np.sum(d * seg, axis=2) / np.maximum(np.sum(seg * seg, axis=2), 1e-12), 0.0, 1.0)
+        return np.min(np.linalg.norm(d - u[..., None] * seg, axis=2), axis=1)
 
 
 @dataclass
@@ -301,11 +341,12 @@ class _Fit:
 
 
 def _solve(layout: CameraLayout, p0: np.ndarray, world: np.ndarray, image: np.ndarray,
-           nfev_per_param: int = 400) -> _Fit | None:
-    if 2 * len(world) < len(p0):
+           nfev_per_param: int = 400, lines: LineClicks | None = None) -> _Fit | None:
+    n_lines = len(lines) if lines is not None else 0
+    if 2 * len(world) + n_lines < len(p0):
         raise CalibrationError(f"{len(world)} points are too few for {len(p0)} camera parameters")
     try:
-        sol = least_squares(layout.residuals, p0, args=(world, image), method="lm", x_scale="jac",
+        sol = least_squares(layout.residuals, p0, args=(world, image, lines), method="lm", x_scale="jac",
                             max_nfev=nfev_per_param * len(p0))
     except ValueError:
         return None
@@ -314,7 +355,7 @@ def _solve(layout: CameraLayout, p0: np.ndarray, world: np.ndarray, image: np.nd
     K, R, t, _ = layout.unpack(sol.x)
     if np.median((world @ R.T + t)[:, 2]) <= 0:
         return None
-    return _Fit(layout, sol.x, float(2 * sol.cost), sol.jac, 2 * len(world))
+    return _Fit(layout, sol.x, float(2 * sol.cost), sol.jac, 2 * len(world) + n_lines)
 
 
 def refine(cam: Camera, world: np.ndarray, image: np.ndarray, model: str = "square", n_dist: int = 0,
@@ -448,6 +489,7 @@ def calibrate(
     n_dist: int = 0,
     suggest: Sequence[str] = (),
     principal_point: str = "prior",
+    lines: LineClicks | None = None,
 ) -> CalibrationResult:
     """Calibrate a camera from ≥ 6 3D↔2D correspondences, all on one plane or not.
 
@@ -460,6 +502,8 @@ def calibrate(
         n_dist: radial distortion coefficients to fit (0–2; needs many well-spread points).
         suggest: point names to recommend when the input is degenerate.
         principal_point: one of :data:`PRINCIPAL_POINT_MODES` (coplanar points: always the centre).
+        lines: pixels clicked along straight court lines (:class:`LineClicks`): each pulls the line, as the
+            lens draws it, through its click — what pins the lens distortion of a wide-angle camera.
     Raises:
         CalibrationError: too few points, collinear points, non-finite input, or no fit converged.
     """
@@ -486,14 +530,14 @@ def calibrate(
         if model != "square":
             warnings.append(f"model {model!r} needs points off the plane; fitted square pixels instead")
         fit = _best_fit(camera_layout("square", n_dist, "centre", size), plane_starts(world, image_px, size, plane),
-                        world, image_px)
+                        world, image_px, lines=lines)
     else:
         method, plane = "general", None
         starts = _dlt_starts(world, image_px, size)
         on_floor = np.abs(world[:, 2]) < COPLANAR_TOL_M
         if on_floor.sum() >= 4 and fit_plane(world[on_floor]).spread_m >= 0.5:
             starts += plane_starts(world[on_floor], image_px[on_floor], size)
-        fit = _general_fit(model, n_dist, principal_point, size, starts, world, image_px, warnings)
+        fit = _general_fit(model, n_dist, principal_point, size, starts, world, image_px, warnings, lines)
     if fit is None:
         raise CalibrationError(f"no camera fits the {len(world)} points: check that each name matches where it "
                                "was clicked")
@@ -503,6 +547,12 @@ def calibrate(
     residuals = dict(zip(names, res.tolist()))
     centre_sigma, focal_sigma = _uncertainty(fit)
     warnings += _geometry_warnings(cam, image_px, plane, len(world), centre_sigma, focal_sigma)
+    if lines is not None and len(lines):
+        off = lines.residuals(cam.project)
+        far = off > LINE_CLICK_OFF_PX
+        warnings += ([f"{int(far.sum())} of the {len(lines)} points along court lines lie off their line by more "
+                      f"than {LINE_CLICK_OFF_PX:g} px (up to {off.max():.0f} px): check that each is on the line it "
+                      "names (court_line_points.csv)"] if far.any() else [])
     cam.rms_px, cam.residuals_px, cam.source = rms, residuals, "calibrated"
     cam.meta.update(calibration_meta(method, centre_sigma, focal_sigma, warnings))
     return CalibrationResult(cam, names, residuals, rms, _suspects(res, names), method, centre_sigma,
@@ -510,11 +560,15 @@ def calibrate(
 
 
 def _best_fit(layout: CameraLayout, starts: Sequence[Camera], world: np.ndarray, image: np.ndarray,
-              nfev_per_param: int = 400) -> _Fit | None:
-    """The lowest-cost refinement over the starts (None when none converges)."""
+              nfev_per_param: int = 400, lines: LineClicks | None = None) -> _Fit | None:
+    """The lowest-cost refinement over the starts (None when none converges); with ``lines``, the best start
+    on the named points alone is refined once more with them (they cost ~100 projections each)."""
     fits = [f for f in (_solve(layout, layout.pack(c), world, image, nfev_per_param) for c in starts)
             if f is not None]
-    return min(fits, key=lambda f: f.cost) if fits else None
+    best = min(fits, key=lambda f: f.cost) if fits else None
+    if best is None or lines is None or not len(lines):
+        return best
+    return _solve(layout, best.p, world, image, nfev_per_param, lines) or best
 
 
 def coplanar_camera(world: np.ndarray, image_px: np.ndarray, image_size: tuple[int, int],
@@ -532,23 +586,24 @@ def coplanar_camera(world: np.ndarray, image_px: np.ndarray, image_size: tuple[i
 
 
 def _general_fit(model: str, n_dist: int, principal_point: str, size: tuple[int, int], starts: list[Camera],
-                 world: np.ndarray, image: np.ndarray, warnings: list[str]) -> _Fit | None:
+                 world: np.ndarray, image: np.ndarray, warnings: list[str],
+                 lines: LineClicks | None = None) -> _Fit | None:
     """Points off the plane: the principal point at the centre, free, or free under the prior — and with the
     prior only when it explains the points clearly better (a BIC test for its two extra parameters) and
     stays within 4 σ of the centre."""
     if principal_point == "free":
-        return _best_fit(camera_layout(model, n_dist, "free", size), starts, world, image)
-    centred = _best_fit(camera_layout(model, n_dist, "centre", size), starts, world, image)
+        return _best_fit(camera_layout(model, n_dist, "free", size), starts, world, image, lines=lines)
+    centred = _best_fit(camera_layout(model, n_dist, "centre", size), starts, world, image, lines=lines)
     if principal_point == "centre" or centred is None:
         return centred
-    n_data = 2 * len(world)
+    n_data = 2 * len(world) + (len(lines) if lines is not None else 0)
     sigma = max(np.sqrt(centred.cost / max(n_data - len(centred.p), 1)), NOISE_FLOOR_PX)
     layout = camera_layout(model, n_dist, "prior", size, noise_px=sigma)
     c = centred.camera(size)
-    free = _best_fit(layout, [c, *starts], world, image)
+    free = _best_fit(layout, [c, *starts], world, image, lines=lines)
     if free is None:
         return centred
-    data_cost = float(np.sum(free.layout.residuals(free.p, world, image)[:n_data] ** 2))
+    data_cost = float(np.sum(free.layout.residuals(free.p, world, image, lines)[:n_data] ** 2))
     s2 = max(data_cost / max(n_data - len(free.p), 1), NOISE_FLOOR_PX**2)
     if (centred.cost - data_cost) / s2 < 2 * np.log(n_data):
         return centred
@@ -573,6 +628,7 @@ def calibrate_court(
     model: str = "square",
     n_dist: int = 0,
     principal_point: str = "prior",
+    line_points: Sequence[tuple[str, str, Sequence[float]]] = (),
 ) -> CalibrationResult:
     """Calibrate from clicked named points of ``court`` (floor points alone suffice).
 
@@ -580,6 +636,9 @@ def calibrate_court(
         court: the court model whose named points were clicked.
         image_points: point name → (x, y) pixels.
         image_size: (W, H).
+        line_points: ``(start, end, (x, y) pixels)``: a pixel clicked anywhere on the straight court line
+            from the named point ``start`` to ``end`` (``court_line_points.csv``); several along a side line
+            bent by a wide-angle lens give its distortion (with ``n_dist`` ≥ 1).
     Raises:
         KeyError: a name is not a point of the court (the message lists the valid names).
         CalibrationError: degenerate input; the message names points to add.
@@ -590,8 +649,13 @@ def calibrate_court(
     off = court.off_ground_points()
     suggest = [n for n in off if n not in image_points] + [n for n in court.point_names
                                                            if n not in image_points and n not in off]
+    lines = None
+    if len(line_points):
+        lines = LineClicks(court.point_array([a for a, _, _ in line_points]),
+                           court.point_array([b for _, b, _ in line_points]),
+                           np.array([xy for _, _, xy in line_points], dtype=float).reshape(-1, 2))
     return calibrate(world, image, image_size, names=names, model=model, n_dist=n_dist, suggest=suggest,
-                     principal_point=principal_point)
+                     principal_point=principal_point, lines=lines)
 
 
 def court_view_problems(camera: Camera, court: Court) -> list[str]:

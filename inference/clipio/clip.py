@@ -12,7 +12,7 @@ from . import csvfiles
 from .clip_yaml import ClipInfo, read_clip_yaml, write_clip_yaml
 from .errors import FormatError
 from .players import PlayerTracks, read_players_csv, write_players_csv
-from .tables import Ball3D, BallTrack, CourtPoints, HitEvents, InactiveBalls
+from .tables import Ball3D, BallTrack, CourtLinePoints, CourtPoints, HitEvents, InactiveBalls
 
 if TYPE_CHECKING:
     from .frames import FrameSource
@@ -244,6 +244,17 @@ class Clip:
             known_names=known_names,
             skipped=skipped,
         )
+
+    @property
+    def court_line_points_path(self) -> Path:
+        return self.root / "court_line_points.csv"
+
+    def read_court_line_points(self, *, known_names: Iterable[str] | None = None, missing_ok: bool = False,
+                               skipped: list[FormatError] | None = None) -> CourtLinePoints:
+        """``court_line_points.csv`` (optional: points clicked along straight court lines)."""
+        return self._read(self.court_line_points_path, csvfiles.read_court_line_points_csv,
+                          lambda: CourtLinePoints([], [], [[0.0, 0.0]][:0]), missing_ok, known_names=known_names,
+                          skipped=skipped)
 
     def write_court_points(self, points: CourtPoints) -> Path:
         return csvfiles.write_court_points_csv(self.court_points_path, points)

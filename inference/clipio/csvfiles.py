@@ -18,12 +18,13 @@ import numpy as np
 
 from .csvtable import CsvTable, closest, duplicated, format_floats, format_ints, parse_rows, write_csv
 from .errors import FormatError
-from .tables import BALL3D_KINDS, EVENT_LABELS, Ball3D, BallTrack, CourtPoints, HitEvents, InactiveBalls
+from .tables import BALL3D_KINDS, EVENT_LABELS, Ball3D, BallTrack, CourtLinePoints, CourtPoints, HitEvents, InactiveBalls
 
 BALL_COLUMNS = ("frame", "visibility", "x", "y")
 INACTIVE_BALLS_COLUMNS = ("frame", "ball_no", "x", "y")
 EVENTS_COLUMNS = ("frame", "event")
 COURT_POINTS_COLUMNS = ("name", "x", "y")
+COURT_LINE_POINTS_COLUMNS = ("start", "end", "x", "y")
 BALL_3D_COLUMNS = ("frame", "x_m", "y_m", "z_m", "segment", "kind", "sigma_m")
 
 UNIT_DECIMALS = 7
@@ -285,6 +286,26 @@ def write_court_points_csv(path: str | Path, points: CourtPoints) -> Path:
         ],
         points.extra,
     )
+
+
+# ---------------------------------------------------------------------------- court_line_points.csv
+def read_court_line_points_csv(path: str | Path, *, known_names: Iterable[str] | None = None,
+                               skipped: list[FormatError] | None = None) -> CourtLinePoints:
+    """Read ``court_line_points.csv`` (``start,end,x,y``: a pixel anywhere on the straight court line from the
+    court point ``start`` to ``end``, normalised); with ``known_names`` other point names are rejected."""
+    known = None if known_names is None else list(known_names)
+    table = CsvTable.read(path, COURT_LINE_POINTS_COLUMNS, skipped=skipped)
+
+    def parse(t: CsvTable) -> CourtLinePoints:
+        start, end = t.strings("start"), t.strings("end")
+        t.check(np.array([a == b for a, b in zip(start, end)], dtype=bool),
+                lambda i: f"the line from {start[i]!r} to itself", fix="name the two court points at its ends")
+        if known is not None:
+            _check_known_names(t, start, known)
+            _check_known_names(t, end, known)
+        return CourtLinePoints(start, end, t.unit_coords(_unit_xy(t), ("x", "y")))
+
+    return parse_rows(table, parse, skipped)
 
 
 # -------------------------------------------------------------------------------------- ball_3d.csv

@@ -366,6 +366,30 @@ class CourtPoints(ArraysEqualMixin):
         return {name: (float(u), float(v)) for name, (u, v) in zip(self.names, self.xy)}
 
 
+@dataclass(eq=False)
+class CourtLinePoints(ArraysEqualMixin):
+    """Image positions clicked somewhere along straight court lines (``court_line_points.csv``): several per
+    line trace a side line that a wide-angle lens bends, which gives the lens distortion.
+
+    Attributes:
+        start, end: ``M`` names of the court points at the two ends of each click's line.
+        xy: ``(M, 2) float64``, normalised image coordinates in ``[0, 1]``.
+    """
+
+    start: list[str]
+    end: list[str]
+    xy: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.start, self.end = [str(n) for n in self.start], [str(n) for n in self.end]
+        if len(self.start) != len(self.end):
+            raise ValueError("start and end must have one name per point")
+        self.xy = clip_unit(as_matrix(self.xy, "xy", len(self.start), 2), "xy")
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+
 # ------------------------------------------------------------------------------------------ 3D ball
 @dataclass(eq=False)
 class Ball3D(ArraysEqualMixin):

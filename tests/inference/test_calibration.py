@@ -206,3 +206,41 @@ def test_radial_distortion_fit(padel):
     fitted = calibrate_court(padel, pts, (W, H), n_dist=2)
     assert fitted.rms_px < 0.5 < plain.rms_px
     assert np.linalg.norm(fitted.camera.centre - true.centre) < 0.1
+
+
+def _club_camera(seed: int) -> Camera:
+    """A club's wide-angle court camera: high behind the near glass, 100° across 1920×1080, barrel k1 −0.3…−0.6."""
+    rng = np.random.default_rng(seed)
+    return Camera.from_look_at(eye=[5.0 + rng.uniform(-0.5, 0.5), -1.0 + rng.uniform(-1, 0.5), 6.5 + rng.uniform(-1, 1)],
+                               target=[5.0, 8.5 + rng.uniform(-1, 1), 0.0], image_size=(1920, 1080), fov_deg=100,
+                               dist=np.array([rng.uniform(-0.6, -0.3), 0, 0, 0, 0]))
+
+
+CLUB_POINTS = ["near_service_left", "near_service_right", "far_service_left", "far_service_right", "net_left",
+               "net_right", "far_left", "far_right"]
+
+
+def _along_side_lines(cam: Camera, court, rng) -> list:
+    out = []
+    for a, b in (("near_left", "far_left"), ("near_right", "far_right")):
+        for s in np.linspace(0.1, 0.9, 6):
+            out.append((a, b, cam.project((court.points[a] + s * (court.points[b] - court.points[a]))[None])[0]
+                        + rng.uniform(-1.5, 1.5, 2)))
+    return out
+
+
+def test_points_along_the_bent_side_lines_pin_a_wide_angle_lens(padel):
+    """Eight floor points of a club camera (k1 −0.3…−0.6) plus six clicks along each side line, which the lens
+    bends: camera centre within 0.1 m, focal within 1 %, k1 within 0.02 on every one of three cameras; a click
+    put on the wrong line is flagged."""
+    for seed in range(3):
+        cam, rng = _club_camera(seed), np.random.default_rng(100 + seed)
+        pts = {n: cam.project(padel.points[n][None])[0] + rng.uniform(-1.5, 1.5, 2) for n in CLUB_POINTS}
+        r = calibrate_court(padel, pts, (1920, 1080), n_dist=1, line_points=_along_side_lines(cam, padel, rng))
+        assert np.linalg.norm(r.camera.centre - cam.centre) < 0.1, seed
+        assert abs(r.camera.K[0, 0] / cam.K[0, 0] - 1) < 0.01 and abs(r.camera.dist[0] - cam.dist[0]) < 0.02, seed
+        assert not any("along court lines" in w for w in r.warnings)
+    lines = _along_side_lines(cam, padel, rng)
+    lines[5] = ("near_left", "near_right", lines[5][2])  # a click far up the side line filed under the baseline
+    r = calibrate_court(padel, pts, (1920, 1080), n_dist=1, line_points=lines)
+    assert any("points along court lines lie off their line" in w for w in r.warnings)

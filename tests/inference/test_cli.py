@@ -221,3 +221,37 @@ def test_help_loads_no_heavy_library():
     assert _heavy_modules_after(["--help"]) == set()
     for name in names:
         assert _heavy_modules_after([name, "--help"]) == set(), f"rally3d {name} --help"
+
+
+def test_calibrate_reads_points_clicked_along_court_lines(sample, capsys):
+    """court_line_points.csv (start,end,x,y): clicks along the two side lines of a wide-angle camera, with eight
+    floor points in court_points.csv, give the lens (--distortion 1) and the camera; rally3d check reads the
+    file, and a name that is no court point is an error naming the file and its line."""
+    from inference.court import load_court
+
+    court = load_court("padel")
+    true = Camera.from_look_at(eye=[5.0, -1.5, 6.5], target=[5.0, 8.5, 0.0], image_size=(1280, 720), fov_deg=100,
+                               dist=np.array([-0.45, 0, 0, 0, 0]))
+    size = np.array([1280.0, 720.0])
+    names = ["near_service_left", "near_service_right", "far_service_left", "far_service_right", "net_left",
+             "net_right", "far_left", "far_right"]
+    px = true.project(court.point_array(names)) / size
+    (sample / "court_points.csv").write_text("name,x,y\n" + "".join(f"{n},{x:.6f},{y:.6f}\n" for n, (x, y) in zip(names, px)))
+    rows = []
+    for a, b in (("near_left", "far_left"), ("near_right", "far_right")):
+        for s in np.linspace(0.1, 0.9, 6):
+            x, y = true.project((court.points[a] + s * (court.points[b] - court.points[a]))[None])[0] / size
+            rows.append(f"{a},{b},{x:.6f},{y:.6f}\n")
+    (sample / "court_line_points.csv").write_text("start,end,x,y\n" + "".join(rows))
+    (sample / "camera.yaml").unlink(missing_ok=True)
+    assert main(["calibrate", str(sample), "--distortion", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "+ 12 along court lines (court_line_points.csv)" in out and "lens k1" in out
+    cam = Camera.load(sample / "camera.yaml")
+    assert np.linalg.norm(cam.centre - true.centre) < 0.1 and abs(cam.dist[0] + 0.45) < 0.02
+    assert main(["check", str(sample)]) == 0
+    assert "ok   court_line_points.csv 12" in capsys.readouterr().out
+    (sample / "court_line_points.csv").write_text("start,end,x,y\nnear_left,far_left,0.2,0.5\nnear_left,far_lft,0.3,0.4\n")
+    assert main(["calibrate", str(sample)]) == 1
+    err = capsys.readouterr().err
+    assert "court_line_points.csv" in err and "line 3" in err and "far_left" in err
