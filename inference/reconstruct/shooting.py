@@ -1191,7 +1191,8 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
             for (lam_c, cand), fl in zip(trials, flights):
                 rows, aux2 = problem.assemble(cand, fl=fl)
                 r2 = rows.residuals()
-                cost2 = float(r2 @ r2)
+                with np.errstate(over="ignore", invalid="ignore"):  # a wild trial step: its cost is inf, refused
+                    cost2 = float(r2 @ r2)
                 if np.isfinite(cost2) and cost2 < cost:
                     rel = (cost - cost2) / max(cost, 1e-12)
                     theta, cost, r, J, aux, norm = cand, cost2, r2, rows.jacobian(), aux2, problem.last_norm
