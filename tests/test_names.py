@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-COMPAT_READER = ROOT / "inference" / "scenes.py"  # the one module that may name the old file
+COMPAT_READER = ROOT / "inference" / "video" / "scenes.py"  # the one module that may name the old file
 OLD_FILE = "shots.json"
 
 
