@@ -253,7 +253,7 @@ class Clip:
                                skipped: list[FormatError] | None = None) -> CourtLinePoints:
         """``court_line_points.csv`` (optional: points clicked along straight court lines)."""
         return self._read(self.court_line_points_path, csvfiles.read_court_line_points_csv,
-                          lambda: CourtLinePoints([], [], [[0.0, 0.0]][:0]), missing_ok, known_names=known_names,
+                          CourtLinePoints.empty, missing_ok, known_names=known_names,
                           skipped=skipped)
 
     def write_court_points(self, points: CourtPoints) -> Path:

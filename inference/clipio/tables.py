@@ -389,6 +389,11 @@ class CourtLinePoints(ArraysEqualMixin):
     def __len__(self) -> int:
         return len(self.start)
 
+    @classmethod
+    def empty(cls) -> CourtLinePoints:
+        """No clicks along lines."""
+        return cls([], [], np.empty((0, 2)))
+
 
 # ------------------------------------------------------------------------------------------ 3D ball
 @dataclass(eq=False)

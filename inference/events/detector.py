@@ -359,9 +359,9 @@ class EventDetector:
         xy = dense_xy(ball, n_frames)
         bp = BridgeParams()
         hit = np.isin(cls, [self.class_set.index(h) for h in self.class_set.rules.hits if h in bp.classes])
-        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height, params=bp) if bridge_gaps else (
-            frames_out, np.full(len(frames_out), np.nan))
-        frames_out = np.where(hit, bridged, frames_out)  # far hits in a gap: timed from both flights
+        bridged, sigma = bridge_events(xy, fps, frames_out, aspect=width / height, params=bp, which=hit) \
+            if bridge_gaps else (frames_out, np.full(len(frames_out), np.nan))
+        frames_out = bridged  # far hits in a gap: timed from both flights
         sigma = np.where(hit & np.isfinite(sigma), sigma, spread)  # else: the model's own spread
         order = np.argsort(frames_out, kind="stable")
         frames_out, cls, sigma, conf = frames_out[order], cls[order], sigma[order], conf[order]

@@ -124,14 +124,16 @@ def bridge_contact(xy: np.ndarray, fps: float, frame: int, aspect: float = 16 / 
 
 
 def bridge_events(xy: np.ndarray, fps: float, frames: np.ndarray, aspect: float = 16 / 9,
-                  params: BridgeParams | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  params: BridgeParams | None = None, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Decoded event frames ``(N,)`` → frames moved to their bridged contacts (kept where no gap or no fit)
-    and their uncertainty ``(N,)`` in frames (NaN: not in a gap, the model's own timing)."""
+    and their uncertainty ``(N,)`` in frames (NaN: not in a gap, the model's own timing). ``which``: ``(N,)``
+    bool, the events to bridge (default all); every event still ends its neighbours' flights."""
     frames = np.asarray(frames, np.int64)
     out = frames.copy()
     sigma = np.full(len(out), np.nan)
-    for k, f in enumerate(frames):
-        r = bridge_contact(xy, fps, int(f), aspect, params, others=np.delete(frames, k))
+    todo = np.ones(len(frames), bool) if which is None else np.asarray(which, bool)
+    for k in np.flatnonzero(todo):
+        r = bridge_contact(xy, fps, int(frames[k]), aspect, params, others=np.delete(frames, k))
         if r is not None:
             out[k] = int(np.clip(round(r[0]), 0, len(xy) - 1))
             sigma[k] = r[1]

@@ -454,8 +454,8 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
             extra["iterations"] = [fit.sol.iterations]
             if fit.plan.notes:
                 extra["refits"] = list(fit.plan.notes)
-    single = len(set(int(f) for f in obs.event_frames)) < 2  # its free ends are the whole replay: a failed one is said
-    fits = [f for f in fits if f.ok or single or f.segment.index not in (-1, len(obs.event_frames) - 1)]
+    # a single event's free ends are the whole replay: a failed one is said, not dropped
+    fits = [f for f in fits if f.ok or obs.single_event or f.segment.index not in (-1, len(obs.event_frames) - 1)]
     out = RallyFit("joint", obs.fps, fits, time.perf_counter() - t0, extra=extra,
                    cpu_seconds=time.process_time() - c0, error_model=error_model)
     out.extra["plausibility"] = summary(out, obs, cfg.rms_fail_factor * cfg.pixel_sigma)

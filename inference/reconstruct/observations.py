@@ -71,6 +71,11 @@ class Observations:
         self.event_labels = [str(x) for x in labels]
 
     @property
+    def single_event(self) -> bool:
+        """At most one distinct event frame: the lead-in and run-out are the whole replay."""
+        return len(np.unique(self.event_frames)) < 2
+
+    @property
     def n_frames(self) -> int:
         return len(self.uv)
 

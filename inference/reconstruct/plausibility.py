@@ -518,7 +518,7 @@ def covered_share(fit: RallyFit, obs: Observations) -> float:
     single event frame, of the frames from the first to the last 2D ball (a lone event's lead-in and run-out
     are the whole replay: 3 frames of 3D beside a 180-frame track are no replay of it)."""
     ev = obs.event_frames
-    if len(ev) < 2 or ev[-1] <= ev[0]:
+    if obs.single_event:
         seen = np.flatnonzero(np.isfinite(obs.uv).all(axis=1))
         if not len(seen):
             return 1.0 if any(s.ok for s in fit.segments) else 0.0
@@ -568,7 +568,7 @@ def summary(fit: RallyFit, obs: Observations, rms_limit_px: float | None = None)
         ([f"{failed}/{n} flights failed"] if ok and failed / n > MAX_FAILED_SHARE else []) + \
         ([f"3D for {covered:.0%} of the rally only" + (
             " (a single event: the rest of the track is not one flight from it; are events missing?)"
-            if len(set(int(f) for f in obs.event_frames)) < 2 else "")] if ok and covered < MIN_COVERED_SHARE else []) + \
+            if obs.single_event else "")] if ok and covered < MIN_COVERED_SHARE else []) + \
         ([f"{inside:.0%} of frames inside the court"] if inside < 0.98 else []) + \
         ([f"{below} contacts below the floor"] if below else []) + \
         ([f"{over} flights over the RMS limit"] if over else [])
