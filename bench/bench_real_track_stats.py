@@ -3,7 +3,7 @@ events, measured the same way on simulated rallies degraded as the shipped event
 the setting fitted from the real figures (:mod:`training.events.stats.real_stats`). Prints one table per sport and
 writes the fitted ``data.degrade`` settings (``conf/data/degrade/real_<sport>_broadcast.yaml``).
 
-    .venv/bin/python bench/bench_real_track_stats.py [--sims 60] [--no-write]
+    .venv/bin/python bench/bench_real_track_stats.py [--sims 60] [--no-write] [--sports tennis,padel]
 
 Real material (measurement only, read in place; skips with one line without it): ``$RALLY3D_REAL`` or the
 development setup's ``shared/real`` beside the checkout — tennis: 250 points of a real final (a real
@@ -24,8 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 HEADER = """# Fitted from real broadcast tracks (bench/bench_real_track_stats.py, {what}): the gaps of a real tracker around
-# the near and far players' hits and the bounces, the other misses and the jitter; what it cannot measure
-# (outliers, smoothing, clean clips) is the shipped tagger's setting. Regenerate with its command line.
+# the near and far players' hits and the bounces, the other misses, the wrong positions and the jitter (the real
+# tracks are unsmoothed: p_smooth 0); what it cannot measure (clean clips) is the shipped tagger's setting.
+# Regenerate with its command line.
 # Use as: python train.py +experiment=tagger_{sport}_players +data/degrade=real_{sport}_broadcast
 """
 
@@ -71,6 +72,8 @@ def real_padel(root: Path, fps: float = 25.0):
 # the view of the real material: the padel track is a broadcast (high behind the glass, high lobs leave the
 # picture's top); the tennis points and the default tennis camera are both broadcasts
 REAL_VIEW = {"tennis": "tennis_broadcast", "padel": "padel_broadcast"}
+#: a tour final's main camera (long lens far behind the baseline), the view of the real tennis points
+TOUR_VIEW = "tennis_tv"
 
 
 def simulated(clips, seed: int, degrade: dict | None):
@@ -98,7 +101,23 @@ def row(name: str, s: dict) -> str:
             f"{s['other_runs_per_s']:.2f} / {s['other_runs_s'][1] if s['other_runs_s'] else float('nan'):.2f} | "
             f"{s['other_miss_share']:.2f} | {s['jitter_px']} | {s['top_gap_share']} / {s['top_frame_share']} / {s['top_gap_s']} | "
             f"{' / '.join(f'{q:.2f}' for q in s['serve_flight_s']) if s['serve_flight_s'] else '–'} | "
-            f"{' / '.join(f'{q:.2f}' for q in s['shot_flight_s']) if s.get('shot_flight_s') else '–'} |")
+            f"{' / '.join(f'{q:.2f}' for q in s['shot_flight_s']) if s.get('shot_flight_s') else '–'} | "
+            f"{s.get('outlier_share', '–')} | {frame(s)} |")
+
+
+def frame(s: dict) -> str:
+    """Where the picture shows the far hits, the bounces and the near hits (median image row) and how fast the
+    ball leaves the far and the near hits (px per 1/50 s, 1080 rows): the camera's framing and lens, the pace."""
+    def med(c):
+        r = s[c].get("row")
+        return f"{r[1]:.2f}" if r else "–"
+
+    def spd(c):
+        v = s[c].get("speed_after")
+        return f"{v:.1f}" if v is not None else "–"
+
+    return (f"{med('player_far')} / {med('ground')} / {med('player_near')}; "
+            f"{spd('player_far')} / {spd('player_near')}")
 
 
 def main(argv=None) -> int:
@@ -112,6 +131,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sims", type=int, default=60, help="simulated rallies per sport and setting")
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--no-write", action="store_true", help="print only; do not write conf/data/degrade/*.yaml")
+    ap.add_argument("--sports", default="tennis,padel", help="comma-separated: tennis, padel")
     args = ap.parse_args(argv)
     root = real_root()
     if not root.is_dir():
@@ -120,8 +140,13 @@ def main(argv=None) -> int:
     t0 = time.process_time()
     cols = ("| tracks | near hits: hidden / gap s median (25–90 %) | far hits (not serves) | far serves | bounces | "
             "other misses per s / median s | other-miss share | jitter px | gaps above the picture: share of gaps / "
-            "of frames / median s | serve → bounce s (10 / 50 / 90 %) | rally shot → bounce s (10 / 50 / 90 %) |")
+            "of frames / median s | serve → bounce s (10 / 50 / 90 %) | rally shot → bounce s (10 / 50 / 90 %) | "
+            "wrong positions (> 15 px off) | image row of far hit / bounce / near hit; px per 1/50 s after a far / "
+            "near hit |")
+    wanted = set(args.sports.split(","))
     for sport, read in (("tennis", real_tennis), ("padel", real_padel)):
+        if sport not in wanted:
+            continue
         real = measure(read(root))
         base = experiment_degrade(sport)
         from training.events.synthetic.simulate import simulate_clips
@@ -131,7 +156,8 @@ def main(argv=None) -> int:
         # the training camera's own share of frames above the picture; the crop makes up only the rest
         clean = measure(simulated(sims, args.seed, None))
         crop = top_crop_for([c.ball for c in sims], max(0.0, real["top_frame_share"] - clean["top_frame_share"]))
-        fitted = degrade_from(real, base, top_crop=crop)
+        # both real materials are unsmoothed (a tracker's raw output; a hand annotation)
+        fitted = degrade_from(real, base, top_crop=crop, smoothed=False)
         shipped = measure(simulated(sims, args.seed, base))
         refit = measure(simulated(sims, args.seed, fitted))
         view = None
@@ -140,14 +166,17 @@ def main(argv=None) -> int:
                                                     camera=REAL_VIEW[sport]), args.seed, None))
         print(f"\n## {sport}: {real['clips']} real clips, {args.sims} simulated rallies per setting\n")
         print(cols)
-        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         print(row("real", real))
         if view is not None:
             print(row(f"simulated, clean, the real material's view ({REAL_VIEW[sport]})", view))
         print(row(f"simulated, clean, the training camera ({DEFAULT_CAMERA[sport]})", clean))
-        if sport == "tennis":  # the tour pace (synth.rally.TENNIS_TOUR): a final's rally shots
+        if sport == "tennis":  # the tour pace (synth.rally.TENNIS_TOUR): a final's rally shots, as broadcast
             tour = simulate_clips(sport, args.sims, args.seed, cache, progress=False, pace="tour")
             print(row("simulated, clean, the training camera, tour pace", measure(simulated(tour, args.seed, None))))
+            tv = simulate_clips(sport, args.sims, args.seed, cache, progress=False, pace="tour", camera=TOUR_VIEW)
+            print(row(f"simulated, clean, tour pace through a tour broadcast's camera ({TOUR_VIEW})",
+                      measure(simulated(tv, args.seed, None))))
         print(row("simulated, the shipped tagger's degradation", shipped))
         print(row("simulated, fitted to the real tracks", refit))
         if not args.no_write:

@@ -346,15 +346,18 @@ TENNIS = RallyConfig(
 
 CONFIGS = {"padel": PADEL, "tennis": TENNIS}
 
-#: Tennis at the pace of a men's tour final: groundstrokes faster, flatter and lower over the net. Fitted to a
-#: real final's rally shots (a hit to the next bounce, not the serve): 0.64 / 0.86 / 1.23 s at 10 / 50 / 90 %
-#: real, 0.70 / 0.88 / 1.14 s with these ranges, 0.88 / 1.10 / 1.30 s with the default ones (bench/
-#: bench_real_track_stats.py prints them). The default pace stays the club player's (the sample, the tests).
+#: Tennis at the pace of a men's tour final: groundstrokes faster, flatter and lower over the net, from deep
+#: behind the baseline. Fitted to a real final's rally shots (a hit to the next bounce, not the serve): 0.64 /
+#: 0.86 / 1.23 s at 10 / 50 / 90 % real, 0.41 / 0.85 / 1.14 s with these ranges, 0.88 / 1.10 / 1.30 s with the
+#: default ones (bench/bench_real_track_stats.py prints them). The players' base 1–5 m behind the baseline (hits
+#: 0.4 / 2.0 / 4.7 m behind at 10 / 50 / 90 %; the club pace 0.3 m median): tour players return and rally 2–6 m
+#: behind it (the real broadcasts' 3D contacts: 1.8–4.5 m). The default pace stays the club player's (the sample,
+#: the tests).
 TENNIS_TOUR = replace(TENNIS, shots={
     **TENNIS.shots,
     "topspin": replace(TENNIS.shots["topspin"], speed=(24.0, 48.0), spin=(20.0, 55.0), clearance=(0.15, 1.0)),
     "slice": replace(TENNIS.shots["slice"], speed=(16.0, 36.0), clearance=(0.1, 0.7)),
-})
+}, back_depth=(13.0, 17.0))
 
 #: the rally configurations by pace: ``club`` (the default) and the sports that have a ``tour`` one
 PACES = {"club": CONFIGS, "tour": {"tennis": TENNIS_TOUR}}

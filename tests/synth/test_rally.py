@@ -291,3 +291,23 @@ def test_tennis_at_tour_pace_flies_as_fast_as_a_real_final():
     assert 0.78 <= np.median(tour) <= 0.95 and np.median(club) >= np.median(tour) + 0.12
     with pytest.raises(KeyError, match="no tour rally configuration for sport 'padel'"):
         default_config("padel", "tour")
+
+
+def test_tour_players_rally_from_deep_behind_the_baseline():
+    """At a tour final's pace the players hit from 1–5 m behind the baseline (real broadcasts' 3D contacts:
+    1.8–4.5 m), at the club pace from about the baseline; serves stay at the baseline."""
+    court = load_court("tennis")
+
+    def behind(config):
+        out = []
+        for k in range(16):
+            r = simulate_rally(court, 50.0, np.random.default_rng(300 + k), sport="tennis", config=config)
+            hits = [c for c in r.contacts if c.event.startswith("player") and c.in_rally]
+            assert abs(hits[0].position[1] - (0.0 if hits[0].event == "player_near" else 23.77)) < 0.5  # serve
+            out += [-c.position[1] if c.event == "player_near" else c.position[1] - 23.77 for c in hits[1:]]
+        return np.array(out)
+
+    tour, club = behind(default_config("tennis", "tour")), behind(default_config("tennis"))
+    assert len(tour) > 30 and len(club) > 30
+    assert 1.5 <= np.median(tour) <= 3.0 and np.quantile(tour, 0.9) >= 3.5
+    assert np.median(club) <= 0.8

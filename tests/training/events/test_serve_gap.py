@@ -136,3 +136,30 @@ def test_real_stats_time_the_rally_shots_apart_from_the_serve():
     s = measure([(track, ev, 50.0, 1920, 1080)])
     assert s["serve_flight_s"][1] == pytest.approx(30 / 50)
     assert s["shot_flight_s"][1] == pytest.approx(42 / 50)  # 110 → 152; the last hit has no bounce after it
+
+
+def test_real_stats_count_wrong_positions_and_fit_an_unsmoothed_tracker():
+    """Positions far (> 15 px at 1080 rows) off the quadratic through their neighbours are counted as wrong
+    ones, away from the contacts (a hit's kink is not one); the fitted setting draws that share of outliers,
+    and a tracker said to be unsmoothed gets no smoother (the real tracks: 0.13 % wrong, raw output; the shipped
+    setting had 10 % and the smoother on 70 % of the clips)."""
+    def clip(x, y, ev):
+        n = len(x)
+        return BallTrack(np.arange(n), np.ones(n, np.int8), np.stack([x / 1920, y / 1080], 1)), ev, 50.0, 1920, 1080
+
+    t = np.arange(300.0)
+    x, y = 400 + 3.0 * t, 300 + 0.02 * (t - 150) ** 2
+    ev = HitEvents([20, 150, 280], ["player_near", "player_far", "ground"])
+    bad = y.copy()
+    bad[[60, 200, 230, 250]] += 60.0
+    s = measure([clip(x, bad, ev)])
+    assert 0.05 < s["outlier_share"] < 0.2  # each wrong position spoils the 7 windows around it
+    assert measure([clip(x, y, ev)])["outlier_share"] == 0.0
+    k = np.arange(35.0)  # a fast hit's kink at frame 20: 10 px a frame across, then 60 down
+    kx, ky = np.where(k < 20, 400 + 10 * k, 600), np.where(k < 20, 100, 100 + 60 * (k - 20))
+    assert measure([clip(kx, ky, HitEvents([2, 20, 34], ["ground", "player_far", "ground"]))])["outlier_share"] == 0.0
+    assert measure([clip(kx, ky, HitEvents([2, 34], ["player_far", "ground"]))])["outlier_share"] > 0
+    fit = degrade_from(s, {"p_clean": 0.5, "p_smooth": 0.7, "outlier_frac": 0.1}, smoothed=False)
+    assert fit["p_smooth"] == 0.0 and fit["outlier_frac"] == pytest.approx(min(0.5, 2 * s["outlier_share"]), abs=1e-4)
+    assert degrade_from(s, {"p_clean": 0.5, "p_smooth": 0.7})["p_smooth"] == 0.7  # not told: the base's
+    DegradeConfig.from_dict(fit)

@@ -21,3 +21,16 @@ def test_tour_share_is_refused_where_the_sport_has_no_tour_pace():
         EventDataModule(sport="padel", class_set="padel6", tour=0.5)
     with pytest.raises(ValueError, match=r"data.tour must be a fraction"):
         EventDataModule(sport="tennis", class_set="tennis4", tour=1.5)
+
+
+def test_tour_rallies_are_filmed_by_the_tour_camera_when_told(tmp_path):
+    """``data.tour_camera``: the tour-pace rallies come through that preset (a tour broadcast's long lens far
+    behind the baseline), the club ones through the sport's default camera; an unknown preset is refused."""
+    dm = EventDataModule(sport="tennis", class_set="tennis4", n_train=4, n_val=1, n_test=1, seed=5, tour=0.5,
+                         tour_camera="tennis_tv", cache_dir=str(tmp_path))
+    clips = dm.raw_clips("train")
+    behind = [-float(c.camera.centre[1]) for c in clips]  # metres behind the near baseline
+    assert all(b < 16.0 for b in behind[:2])          # tennis_broadcast: 14 ± 0.6 m
+    assert all(17.5 <= b <= 40.5 for b in behind[2:])  # tennis_tv: 18–40 m
+    with pytest.raises(ValueError, match="data.tour_camera: .*unknown camera preset 'tennis_blimp'"):
+        EventDataModule(sport="tennis", class_set="tennis4", tour=0.5, tour_camera="tennis_blimp")

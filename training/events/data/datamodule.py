@@ -335,7 +335,9 @@ class EventDataModule(L.LightningDataModule):
         around: share of the synthetic clips simulated with the server's bounces before the serve and the
             ball after the point (not events: the model learns they are none).
         tour: share of the synthetic clips played at a tour final's pace (tennis: faster, flatter
-            groundstrokes, :data:`synth.rally.TENNIS_TOUR`); the rest at the club pace.
+            groundstrokes from deeper, :data:`synth.rally.TENNIS_TOUR`); the rest at the club pace.
+        tour_camera: the camera preset that films the tour-pace clips (:mod:`synth.cameras`; ``tennis_tv``: a
+            tour broadcast's long lens far behind the baseline); None: the sport's default camera.
         degrade: :class:`~training.events.synthetic.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
@@ -360,7 +362,7 @@ class EventDataModule(L.LightningDataModule):
                  degrade: dict | None = None, root_weights: list[float] | None = None,
                  split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None,
                  sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2, prep_workers: int = 0,
-                 tour: float = 0.0):
+                 tour: float = 0.0, tour_camera: str | None = None):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -392,6 +394,14 @@ class EventDataModule(L.LightningDataModule):
             except KeyError as e:
                 raise ValueError(f"data.tour: {e.args[0]}; set data.tour=0") from None
         self.tour = float(tour)
+        if tour_camera is not None:
+            from synth.cameras import CameraSpec
+
+            try:
+                CameraSpec.preset(str(tour_camera))
+            except KeyError as e:
+                raise ValueError(f"data.tour_camera: {e.args[0]}") from None
+        self.tour_camera = None if tour_camera is None else str(tour_camera)
         self._sources = None
         self.clip_source: dict[str, list[int]] = {}  # per split: the root index of each clip
         self.counts = {"train": n_train, "val": n_val, "test": n_test}
@@ -437,12 +447,13 @@ class EventDataModule(L.LightningDataModule):
             for pace, n_pace, base in (("club", n - n_tour, self.seed * 10 + offset),
                                        ("tour", n_tour, self.seed * 10 + offset + 1000)):
                 n_around = int(round(self.around * n_pace))
+                cam = self.tour_camera if pace == "tour" else None
                 if n_pace > n_around:
                     clips += simulate_clips(self.sport, n_pace - n_around, base, self.cache_dir, players=pl,
-                                            workers=w, pace=pace)
+                                            workers=w, pace=pace, camera=cam)
                 if n_around:  # rallies with the server's bounces before the serve and the ball after the point
                     clips += simulate_clips(self.sport, n_around, base + 5, self.cache_dir, around=True,
-                                            players=pl, workers=w, pace=pace)
+                                            players=pl, workers=w, pace=pace, camera=cam)
         return clips
 
     def labelled(self, split: str) -> list[LabelledClip]:

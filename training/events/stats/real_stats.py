@@ -3,8 +3,11 @@ with hand-made event labels) and on simulated degraded ones, and the degradation
 (:class:`~training.events.synthetic.degrade.DegradeConfig`) that reproduce the real figures.
 
 Per event class: the share of events whose frame (±1) has no ball (*hidden*), the lengths of those gaps
-(seconds) and where the event lies in them; elsewhere: the runs of misses (count per second, lengths) and
-the share of the visible frames they take; the jitter (robust σ of each point's distance from a quadratic
+(seconds) and where the event lies in them, the image row where the picture shows it (a share of the
+height, 10 / 50 / 90 %: the camera's framing) and, for a hit, how fast the ball leaves it in the picture
+(px per 1/50 s on a 1080-row picture: the lens and the pace); elsewhere: the runs of misses (count per second, lengths) and
+the share of the visible frames they take; the positions more than :data:`OUTLIER_PX` off their neighbours'
+quadratic (wrong positions); the jitter (robust σ of each point's distance from a quadratic
 through its neighbours, px) and whether positions are whole pixels; the share of gaps the ball leaves and
 re-enters through the top of the picture (lobs); the serve's flight (serve → its bounce, s: the serve's speed,
 which the simulator's tennis serves were fitted to). Only the labelled stretch counts (from the first to the
@@ -35,17 +38,26 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(e[::2].tolist(), e[1::2].tolist()))
 
 
-def _jitter_px(xy: np.ndarray, half: int = 3) -> list[float]:
-    """Distances (px, both axes pooled) of every fully seen window's centre from a quadratic through it."""
+def _residuals_px(xy: np.ndarray, half: int = 3) -> np.ndarray:
+    """``(M, 2)`` offsets (px) of every fully seen window's centre from a quadratic through the window, scaled
+    to the centre's own noise (÷ √(1 − h), so that a σ of jitter reads as σ)."""
     t = np.arange(-half, half + 1, dtype=float)
     A = np.stack([np.ones_like(t), t, t * t], 1)
     H = A @ np.linalg.pinv(A)
     ok = np.convolve(np.isfinite(xy).all(axis=1).astype(int), np.ones(2 * half + 1, int), "valid") == 2 * half + 1
-    out = []
-    for s in np.flatnonzero(ok):
-        w = xy[s:s + 2 * half + 1]
-        out.extend(((w - H @ w)[half] / np.sqrt(1.0 - H[half, half])).tolist())
-    return out
+    out = [(xy[s:s + 2 * half + 1] - H @ xy[s:s + 2 * half + 1])[half] for s in np.flatnonzero(ok)]
+    return np.array(out).reshape(-1, 2) / np.sqrt(1.0 - H[half, half])
+
+
+def _jitter_px(xy: np.ndarray, half: int = 3) -> list[float]:
+    """Distances (px, both axes pooled) of every fully seen window's centre from a quadratic through it."""
+    return _residuals_px(xy, half).ravel().tolist()
+
+
+#: a position this far (px on a 1080-row picture) off the quadratic through its neighbours is a wrong one (an
+#: outlier: the tracker on something else), not jitter; windows within 5 frames of an event are not counted (a
+#: contact's kink is no outlier)
+OUTLIER_PX = 15.0
 
 
 def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, height: int,
@@ -53,8 +65,10 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     """The raw figures of one clip (lists, pooled by :func:`measure`)."""
     n = int(max(track.frame.max() + 1 if len(track) else 0, events.frame.max() + 1 if len(events) else 0))
     out = {"hidden": {c: [] for c in CLASSES}, "gap_s": {c: [] for c in CLASSES}, "where": {c: [] for c in CLASSES},
+           "row": {c: [] for c in CLASSES}, "speed_after": {c: [] for c in CLASSES},
            "other_runs_s": [], "seconds": 0.0, "visible": 0, "missed_other": 0, "jitter": [], "integer": [],
-           "gaps": 0, "top_gaps": 0, "top_gap_s": [], "serve_flight_s": [], "shot_flight_s": []}
+           "gaps": 0, "top_gaps": 0, "top_gap_s": [], "serve_flight_s": [], "shot_flight_s": [], "outliers": 0,
+           "windows": 0}
     if not len(events) or not n:
         return out
     dense = track.dense(n)
@@ -71,11 +85,20 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
         if k + 1 < len(ev) and ev[k + 1] == "ground":
             out["shot_flight_s"].append(float(events.frame[k + 1] - events.frame[k]) / fps)
     runs = [(s + a, e + a) for s, e in _runs(~seen[a:b])]
+    step = max(1, int(round(0.16 * fps)))  # the flight after a hit: 0.16 s (8 frames at 50 fps)
     for k, (f, c) in enumerate(zip(events.frame.tolist(), events.event.tolist())):
         if k == 0 and c == "player_far":
             c = "serve_far"  # the clip's first event, the far player's hit: a far serve
         if c not in CLASSES:
             continue
+        near_seen = [g for g in (f, f - 1, f + 1, f - 2, f + 2) if 0 <= g < n and seen[g]]
+        if near_seen:  # where the picture shows the event, and how fast the ball leaves a hit
+            out["row"][c].append(float(xy[near_seen[0], 1] / height))
+        if c in ("player_near", "player_far"):
+            d = np.hypot(*np.diff(xy[f + 1:f + 1 + step], axis=0).T)
+            d = d[np.isfinite(d)]
+            if len(d) >= 3:
+                out["speed_after"][c].append(float(np.median(d)) * (1080.0 / height) * (fps / 50.0))
         hidden = not seen[max(0, f - 1):f + 2].any()
         out["hidden"][c].append(hidden)
         # a serve's gap is taken whole: its toss lies before the labelled stretch (a clip's first gap, which
@@ -101,6 +124,12 @@ def clip_stats(track: BallTrack, events: HitEvents, fps: float, width: int, heig
     out["seconds"] = (b - a) / fps
     out["visible"] = int(seen[a:b].sum())
     out["jitter"] = _jitter_px(xy[a:b])
+    away = seen.copy()  # the positions away from the events (a contact's kink is not an outlier)
+    for f in events.frame.tolist():
+        away[max(0, f - 5):f + 6] = False
+    res = _residuals_px(np.where(away[:, None], xy, np.nan)[a:b])
+    out["outliers"] = int(np.sum(np.hypot(*res.T) > OUTLIER_PX * height / 1080.0)) if len(res) else 0
+    out["windows"] = len(res)
     p = xy[a:b][seen[a:b]]
     out["integer"] = [bool(np.allclose(p, np.round(p), atol=1e-3))] if len(p) else []
     return out
@@ -120,6 +149,10 @@ def measure(clips, margin_s: float = 0.2) -> dict:
                   "gap_s": [round(float(q), 3) for q in np.quantile(gaps, QUANTILES)] if len(gaps) else None,
                   "where": round(float(np.median(where)), 2) if len(where) else None,
                   "where_iqr": [round(float(q), 2) for q in np.quantile(where, (0.25, 0.75))] if len(where) else None}
+        rows = [v for s in pool for v in s.get("row", {}).get(c, [])]
+        speed = [v for s in pool for v in s.get("speed_after", {}).get(c, [])]
+        out[c]["row"] = [round(float(q), 3) for q in np.quantile(rows, (0.1, 0.5, 0.9))] if rows else None
+        out[c]["speed_after"] = round(float(np.median(speed)), 1) if speed else None
     runs = np.array([r for s in pool for r in s["other_runs_s"]])
     seconds = sum(s["seconds"] for s in pool)
     visible = sum(s["visible"] for s in pool)
@@ -129,6 +162,8 @@ def measure(clips, margin_s: float = 0.2) -> dict:
     out["other_runs_s"] = [round(float(q), 3) for q in np.quantile(runs, QUANTILES)] if len(runs) else None
     out["other_miss_share"] = round(missed / max(visible + missed, 1), 3)
     out["jitter_px"] = round(float(1.4826 * np.median(np.abs(jit - np.median(jit)))), 2) if len(jit) else None
+    windows = sum(s.get("windows", 0) for s in pool)
+    out["outlier_share"] = round(sum(s.get("outliers", 0) for s in pool) / windows, 4) if windows else None
     out["integer_px"] = bool(all(i for s in pool for i in s["integer"])) if any(s["integer"] for s in pool) else None
     gaps = sum(s["gaps"] for s in pool)
     out["top_gap_share"] = round(sum(s["top_gaps"] for s in pool) / gaps, 3) if gaps else None
@@ -143,12 +178,15 @@ def measure(clips, margin_s: float = 0.2) -> dict:
     return out
 
 
-def degrade_from(stats: dict, base: dict | None = None, top_crop: float | None = None) -> dict:
+def degrade_from(stats: dict, base: dict | None = None, top_crop: float | None = None,
+                 smoothed: bool | None = None) -> dict:
     """``data.degrade`` fields that reproduce ``stats`` (from :func:`measure` on real tracks), on top of
-    ``base`` (the fields this cannot measure: outliers, smoothing, clean clips). Gap lengths take the
+    ``base`` (the fields this cannot measure: clean clips, and smoothing unless ``smoothed`` says whether the
+    real tracks were smoothed: False sets ``p_smooth`` 0). Gap lengths take the
     measured 25–75 % range (a gap that holds a contact can run on for seconds: the point's start, a lob);
     probabilities are divided by the share of degraded clips (``1 − p_clean``) so that the pooled figure
-    matches; the jitter's σ ± 30 %; ``top_crop`` as given (:func:`top_crop_for`)."""
+    matches; the jitter's σ ± 30 %; the wrong positions' share (``outlier_frac``) from the positions more
+    than :data:`OUTLIER_PX` off their neighbours' quadratic; ``top_crop`` as given (:func:`top_crop_for`)."""
     out = dict(base or {})
     degraded = 1.0 - float(out.get("p_clean", 0.2))
 
@@ -182,6 +220,10 @@ def degrade_from(stats: dict, base: dict | None = None, top_crop: float | None =
         out["jitter_px"] = [round(0.7 * j, 2), round(1.3 * j, 2)]
     if stats["integer_px"] is not None:
         out["integer_px"] = bool(stats["integer_px"])
+    if stats.get("outlier_share") is not None:
+        out["outlier_frac"] = round(min(0.5, stats["outlier_share"] / max(degraded, 1e-6)), 4)
+    if smoothed is not None:
+        out["p_smooth"] = float(out.get("p_smooth", 0.8)) if smoothed else 0.0
     return out
 
 
