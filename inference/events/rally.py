@@ -38,7 +38,7 @@ Example:
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -89,6 +89,9 @@ class RallyParams:
         in_play_s, setup_s: a clip whose track starts with the ball flying and an event within ``in_play_s``
             starts in play (cut mid-rally) unless the serve found shows its set-up in the ``setup_s`` before
             it (:func:`serve_setup`: the ball held, tossed or bounced by the server, or a pause).
+        between_s: a clip that starts in play and whose rally ends, then at least this long later shows a
+            served point (:func:`next_point`), began with the previous point's end: the point is the served
+            one (real per-point clips of a broadcast open so; between two points lie 20–25 s).
         edge: a gap of the track that the ball leaves and re-enters through the top of the picture within
             this share of the image height (a lob) is no loss of the ball.
     """
@@ -130,6 +133,7 @@ class RallyParams:
     in_play_s: float = 1.0
     setup_s: float = 1.5
     edge: float = 0.06
+    between_s: float = 5.0
 
     @classmethod
     def for_sport(cls, sport: str | None) -> RallyParams:
@@ -742,6 +746,10 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
         if more is None or more[0] - end > params.resume_s * fps:
             break
         end, last = rally_end(xy, fps, more[0], frames, labels, hits, aspect, params, land, sides)
+    if begun is not None and begun <= start and last < len(frames):
+        later = next_point(xy, fps, end, frames, labels, hits, aspect, params, hit_prob, camera, sides)
+        if later is not None:   # the clip opened on the previous point's end: this point is the served one
+            return later
     first = int(np.searchsorted(frames, start, side="left"))
     if params.serve_bounce and first > 0 and labels[first - 1] not in hits and \
             start - frames[first - 1] <= params.serve_bounce_s * fps:
@@ -749,6 +757,51 @@ def segment_rally(xy: np.ndarray, fps: float, frames: np.ndarray, labels, hits=(
     inside = np.zeros(len(frames), bool)
     inside[first:last] = True
     return RallySegment(int(min(start, T - 1)) if T else 0, int(min(end, T - 1)) if T else 0, inside, source)
+
+
+def out_of_play(xy: np.ndarray, fps: float, a: int, b: int, aspect: float, params: RallyParams,
+                flying: float = 0.3) -> bool:
+    """Whether the ball is out of play over frames ``a..b``: in flight (seen or above the picture, moving at
+    least half the clip's typical speed) for less than ``flying`` of the time — between two points it is lost,
+    held or bounced by the server; a rally's ball flies."""
+    if b - a < 2:
+        return False
+    p = _scaled(xy, aspect)
+    v = forward_speed(p, fps)
+    typical = np.nanpercentile(v, 75) if np.isfinite(v).any() else np.inf
+    above = above_picture(xy, params.edge)[a:b]
+    moving = np.nan_to_num(v[a:b], nan=0.0) >= 0.5 * typical
+    return bool(np.mean(moving | above) < flying)
+
+
+def next_point(xy: np.ndarray, fps: float, end: int, frames: np.ndarray, labels: list[str], hits, aspect: float,
+               params: RallyParams, hit_prob: np.ndarray | None = None, camera=None,
+               sides: CourtSides | None = None) -> RallySegment | None:
+    """The point served at least ``between_s`` after a rally that ended at ``end``, as a segment of the whole
+    clip, or None: the ball must be out of play in between (:func:`out_of_play`: lost, held, bounced by the
+    server, not flying) and the later rally hold a run of ``chain_hits`` alternating hits (a point, not the
+    server's bounces or a stray hit between points; its serve may be one the model missed). What lies before
+    it (the previous point's end, the wait) is outside it."""
+    a = int(end) + int(round(params.between_s * fps))
+    keep = np.asarray(frames) > a
+    if a >= len(xy) - 1 or keep.sum() < max(params.chain_hits, 1) or params.chain_hits <= 0:
+        return None
+    if not out_of_play(xy, fps, int(end), a, aspect, params):
+        return None
+    sub_labels = [c for c, k in zip(labels, keep) if k]
+    sub_frames = np.asarray(frames)[keep] - a
+    if chain_serve(sub_frames, sub_labels, hits, fps, params) is None:
+        return None
+    sub = segment_rally(xy[a:], fps, sub_frames, sub_labels, hits, aspect, replace(params, in_play_s=-1.0),
+                        hit_prob[a:] if hit_prob is not None else None, camera, sides)
+    if sub.serve_source in ("in_play", "none") or not sub.inside.any():
+        return None
+    inside_labels = [c for c, k in zip(sub_labels, sub.inside) if k]
+    if chain_serve(sub_frames[sub.inside], inside_labels, hits, fps, params) is None:
+        return None
+    inside = np.zeros(len(frames), bool)
+    inside[np.flatnonzero(keep)[sub.inside]] = True
+    return RallySegment(sub.start + a, sub.end + a, inside, sub.serve_source)
 
 
 def rally_summary(seg: RallySegment, fps: float, outside_labels, kept: bool) -> str:
