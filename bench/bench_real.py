@@ -492,19 +492,21 @@ def review_calls(clip) -> dict:
 
 def racket_contacts(seg: dict, clip) -> list[dict]:
     """The racket contacts of the reconstructed flights (court metres): how far outside the court's lines
-    (behind a baseline or beside a sideline, 0 inside) and how high."""
+    (behind a baseline or beside a sideline, 0 inside) and how high; a hit the 3D fit refitted as another
+    event (``segments.json`` ``refits``: a hit at the floor fitted as a bounce) is not one."""
     from inference.court import load_court
 
     court = load_court(clip.court_path())
     floor = np.array([p for p in court.points.values() if abs(p[2]) < 1e-9])
     lo, hi = floor[:, :2].min(axis=0), floor[:, :2].max(axis=0)
+    refitted = {int(f) for f, _ in seg.get("refits") or []}
     hits = {}
     for s in seg["segments"]:
         if not s.get("reconstructed"):
             continue
         for frame, event, point in ((s["start_frame"], s.get("start_event"), s.get("start_point_m")),
                                     (s["end_frame"], s.get("end_event"), s.get("end_point_m"))):
-            if event and str(event).startswith("player") and point is not None:
+            if event and str(event).startswith("player") and point is not None and int(frame) not in refitted:
                 x, y, z = point
                 hits[int(frame)] = {"frame": int(frame), "event": event,
                                     "xyz_m": [round(v, 2) for v in point],

@@ -23,7 +23,7 @@ Example:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -109,6 +109,16 @@ class CameraSpec:
                        fps=float(FPS_CHOICES[rng.integers(len(FPS_CHOICES))]),
                        roll_deg=float(rng.uniform(-2.0, 2.0)), dist=dist,
                        margin=float(rng.uniform(0.02, 0.10)), run_off=run_off)
+
+    def to_dict(self) -> dict:
+        """The fields as a mapping (``clip.yaml``'s ``synth.camera``); the run-off and the spreads only when set, so
+        a camera without them is written as before they existed."""
+        d = asdict(self)
+        for k, empty in (("run_off", (0.0, 0.0, 0.0)), ("eye_spread", None), ("target_spread", None),
+                         ("elevation_deg", None)):
+            if d[k] == empty or (empty is not None and tuple(d[k]) == empty):
+                d.pop(k)
+        return d
 
     def rotation(self) -> np.ndarray:
         """World→camera rotation including roll."""

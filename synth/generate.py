@@ -214,7 +214,7 @@ def generate_clip(out: str | Path, seed: int, config: SynthConfig | None = None,
         video="frames/" if config.codec == "frames" else "video.mp4", n_frames=rally.n_frames,
         camera_id=config.camera or DEFAULT_CAMERA.get(config.sport), split=None,
         source=f"rally3d synth seed {seed}", licence="CC0-1.0", court=config.court,
-        extra={"synth": {"seed": seed, "outcome": rally.outcome, "camera": _plain(asdict(spec))}},
+        extra={"synth": {"seed": seed, "outcome": rally.outcome, "camera": _plain(spec.to_dict())}},
     ), exist_ok=True)
     infos: list[FrameInfo] = []
 
