@@ -29,8 +29,18 @@ def closest(name: str, choices: Iterable[str]) -> str | None:
     return match[0] if match else None
 
 
+#: the file type a fix names, by suffix (a YAML file is not "saved as CSV")
+FILE_TYPES = {".csv": "CSV", ".yaml": "YAML", ".yml": "YAML", ".json": "JSON", ".xml": "XML", ".txt": "text"}
+
+
+def file_type(path: str | Path) -> str:
+    """``CSV``, ``YAML``, ``JSON``, ``XML`` or ``text``: what a fix calls the file, from its suffix."""
+    return FILE_TYPES.get(Path(path).suffix.lower(), "text")
+
+
 def read_text(path: str | Path) -> str:
-    """Read a UTF-8 text file (a BOM is dropped); ``FormatError`` when missing or not text."""
+    """Read a UTF-8 text file (a BOM is dropped); ``FormatError`` when missing or not text (its fix names
+    the file's type: :func:`file_type`)."""
     path = Path(path)
     if not path.is_file():
         problem = "is a folder, not a file" if path.is_dir() else "file not found"
@@ -38,7 +48,8 @@ def read_text(path: str | Path) -> str:
     try:
         return path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as err:
-        raise FormatError(path, f"not UTF-8 text ({err.reason})", fix="save the file as UTF-8 CSV") from None
+        raise FormatError(path, f"not UTF-8 text ({err.reason})",
+                          fix=f"save the file as UTF-8 {file_type(path)}") from None
 
 
 class CsvTable:

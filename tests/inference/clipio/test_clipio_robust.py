@@ -165,3 +165,19 @@ def test_clip_reads_pass_the_options_through(tmp_path):
     events = clip.read_events(skipped=skipped)
     assert events.frame.tolist() == [1] and "beyond the video" in str(skipped[0])
     np.testing.assert_array_equal(clip.read_events(labels=["ground", "net"], skipped=[]).frame, [1])
+
+
+def test_the_fix_for_a_file_not_in_utf8_names_its_type(tmp_path):
+    """A YAML, JSON or XML file that is not UTF-8 is to be saved as UTF-8 YAML / JSON / XML — not "as UTF-8
+    CSV", which every reader said."""
+    from inference.clipio.csvtable import read_text
+
+    latin = "sport: pádel\n".encode("latin-1")
+    for name, read, kind in [("clip.yaml", read_clip_yaml, "YAML"), ("any.yml", load_yaml, "YAML"),
+                             ("segments.json", load_json, "JSON"), ("annotations.xml", read_text, "XML"),
+                             ("ball.csv", read_text, "CSV"), ("notes", read_text, "text")]:
+        path = tmp_path / name
+        path.write_bytes(latin)
+        with pytest.raises(FormatError, match="not UTF-8") as err:
+            read(path)
+        assert err.value.fix == f"save the file as UTF-8 {kind}", (name, err.value.fix)
