@@ -9,13 +9,14 @@ from __future__ import annotations
 import threading
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from inference.clipio import Clip, FormatError
 
-from .client_js import SHORTCUTS_BUTTON, install_keyboard
+from .client_js import SHORTCUTS_BUTTON, install_keyboard, show_tab
 from .frames import FrameCache
 from .framestack import FrameStack
 from .panels.assist import populate_assist
@@ -63,6 +64,10 @@ HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
 ] + [(f"event {k}", str(k), None, "event_key", k) for k in range(1, 10)]
 
 
+#: the panel tab of each mode (a mode change shows it)
+MODE_TABS = {"ball": "Ball", "stationary": "Still", "court": "Court"}
+
+
 class ClientView:
     """One browser tab on one clip: its session, GUI, frame plane, overlays and render thread."""
 
@@ -100,13 +105,13 @@ class ClientView:
         with self.folder:
             self.nav = populate_navigation(gui, self)
             tabs = gui.add_tab_group()
-            with tabs.add_tab("Ball"):
+            with tabs.add_tab(MODE_TABS["ball"]):
                 self.ball_panel = populate_ball(gui, self)
-            with tabs.add_tab("Still"):
+            with tabs.add_tab(MODE_TABS["stationary"]):
                 self.still_panel = populate_stationary(gui, self)
             with tabs.add_tab("Events"):
                 self.events_panel = populate_events(gui, self)
-            with tabs.add_tab("Court"):
+            with tabs.add_tab(MODE_TABS["court"]):
                 self.court_panel = populate_court(gui, self)
             with tabs.add_tab("Assist"):
                 self.assist_panel = populate_assist(gui, self)
@@ -148,6 +153,7 @@ class ClientView:
             self.target = frame
             self._requested_at.setdefault(frame, time.perf_counter())
             self._cond.notify_all()
+        self.app.note_place(self)
 
     def step(self, delta: int) -> None:
         with self._cond:
@@ -210,9 +216,13 @@ class ClientView:
     def set_mode(self, mode: str) -> None:
         if mode not in MODES:
             raise ValueError(f"unknown mode {mode!r}; modes: {MODES}")
+        changed = mode != self.mode
         self.mode = mode
         if self.nav.mode.value != mode:
             self.nav.mode.value = mode
+        if changed:
+            show_tab(self.client, MODE_TABS[mode])   # the panel follows the mode (M, the dropdown)
+        self.app.note_place(self)
         self.request(overlay=True, gui=True)
 
     def cycle_mode(self) -> None:
@@ -561,7 +571,7 @@ class ClientView:
             f"labelled {sm['labelled']} ({sm['labelled_pct']:.1f} %) · events {sm['events']} · "
             f"still balls {sm['inactive_balls']} · court points {sm['court_points']}"
         )
-        nav.notice.content = f"_{md_escape(s.notices[-1])}_" if s.notices else ""
+        nav.notice.content = f"_{md_escape(relative_to(s.notices[-1], self.app.shown_base))}_" if s.notices else ""
         few = len(s.events) <= 6  # labels of dense marks overlap: then only ticks (the events tab lists them)
         marks = [(f, e.split("_")[-1][:5] if few else "") for f, e in sorted(s.events.items())]
         keys = s.keyframes()
@@ -584,6 +594,21 @@ class ClientView:
         self.events_panel.info.content = (f"{len(s.events)} event(s): {ev_list or 'none'}"
                                           + (f"  \nproposed (V accepts on its frame): {pending}" if pending else ""))
         self.court_panel.info.content = self._court_text()
+        self._offer_court_points()
+
+    def _offer_court_points(self) -> None:
+        """The point dropdown offers the points inside the picture (:meth:`LabelSession.offered_points`);
+        the point chosen stays chosen while it is offered."""
+        offered = tuple(self.session.offered_points()) or tuple(self.session.court.point_names)
+        dropdown = self.court_panel.point
+        if tuple(dropdown.options) == offered:
+            return
+        chosen = str(dropdown.value)
+        dropdown.options = offered
+        if chosen in offered:
+            dropdown.value = chosen
+        else:
+            dropdown.value = self.next_court_point() or offered[0]
 
     def _court_text(self) -> str:
         s = self.session
@@ -614,16 +639,40 @@ def shortcuts_markdown(event_labels: list[str]) -> str:
             "| key | action |\n|---|---|\n" + "\n".join(rows))
 
 
-def error_markdown(clip: Clip, err: Exception) -> str:
-    """What the page shows for a clip that cannot be opened: file, line, problem and fix (all escaped)."""
+#: hosts that serve this machine only: the page may show absolute paths
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def relative_to(text: str, base: Path | None) -> str:
+    """``text`` with the absolute paths under ``base`` written relative to it (``base`` None: unchanged) — what
+    a page served beyond this machine shows of the server's files."""
+    if base is None:
+        return text
+    for root in dict.fromkeys((str(base.resolve()), str(base.absolute()), str(base))):
+        text = text.replace(root + "/", "").replace(root, ".")
+    return text
+
+
+def error_markdown(clip: Clip, err: Exception, base: Path | None = None) -> str:
+    """What the page shows for a clip that cannot be opened: file, line, problem and fix (all escaped); with
+    ``base`` (the dataset, when serving beyond localhost) paths relative to it."""
     if isinstance(err, FormatError):
-        where = md_escape(err.path) + (f", line {err.line}" if err.line is not None else "")
-        text = f"**{where}**  \n{md_escape(err.problem)}"
+        where = md_escape(relative_to(str(err.path), base)) + (f", line {err.line}" if err.line is not None else "")
+        text = f"**{where}**  \n{md_escape(relative_to(err.problem, base))}"
         if err.fix:
-            text += f"  \nfix: {md_escape(err.fix)}"
+            text += f"  \nfix: {md_escape(relative_to(err.fix, base))}"
     else:
-        text = md_escape(f"{type(err).__name__}: {err}")
+        text = md_escape(relative_to(f"{type(err).__name__}: {err}", base))
     return f"⚠ **cannot open {md_escape(clip.root.name)}**  \n{text}"
+
+
+@dataclass(frozen=True)
+class Place:
+    """Where a tab was: its clip folder (resolved), frame and mode."""
+
+    clip: Path
+    frame: int
+    mode: str
 
 
 class LabelerApp:
@@ -640,6 +689,11 @@ class LabelerApp:
         import viser
 
         self.clips = find_clips(target)
+        target = Path(target)
+        dataset = target if target.is_dir() else target.parent   # a manifest.yaml's folder
+        # beyond this machine the pages show paths relative to the dataset (a clip: its folder's parent)
+        self.shown_base: Path | None = None if host in LOCAL_HOSTS else \
+            (dataset.parent if len(self.clips) == 1 and self.clips[0].root.resolve() == dataset.resolve() else dataset)
         self.frame_slots = int(frame_slots)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         setup_server(self.server)
@@ -647,6 +701,7 @@ class LabelerApp:
         self._cache_lock = threading.Lock()
         self.views: dict[int, ClientView] = {}
         self.errors: dict[int, object] = {}  # client id → the error folder shown in its page
+        self.last_place: Place | None = None  # where a tab last was (a reload returns there)
         self._tabs = 0
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
@@ -676,12 +731,27 @@ class LabelerApp:
         client.gui.add_button(SHORTCUTS_BUTTON, order=0.5).on_click(lambda ev: self._shortcuts(client))
         if len(self.clips) > 1:
             self._dataset_panel(client)
+        place = self.last_place
+        roots = [c.root.resolve() for c in self.clips]
+        if place is not None and place.clip in roots:   # a reload: back to the clip, frame and mode
+            view = self.open(client, self.clips[roots.index(place.clip)])
+            if view is not None:
+                view.goto(place.frame)
+                view.set_mode(place.mode)
+                view._notice(f"back at frame {place.frame} ({place.mode} mode), where this page was left")
+                return
         self.open(client, self.clips[0])
 
     def _shortcuts(self, client) -> None:
         view = self.views.get(client.client_id)
         if view is not None:
             view.show_shortcuts()
+
+    def note_place(self, view: ClientView) -> None:
+        """Remember where ``view`` is (its clip, frame and mode): a page opened or reloaded next returns
+        there (noted on every step and mode change: a reload's new tab may connect before the old one has
+        gone)."""
+        self.last_place = Place(view.clip.root.resolve(), int(view.target), view.mode)
 
     def _disconnect(self, client) -> None:
         view = self.views.pop(client.client_id, None)
@@ -723,7 +793,7 @@ class LabelerApp:
     def _show_error(self, client, clip: Clip, err: Exception) -> None:
         gui = client.gui
         with gui.add_folder("⚠ clip not opened", order=0.8) as folder:
-            gui.add_markdown(error_markdown(clip, err))
+            gui.add_markdown(error_markdown(clip, err, self.shown_base))
             if self.views.get(client.client_id) is not None:
                 gui.add_markdown(f"Still showing {md_escape(self.views[client.client_id].clip.root.name)}.")
             if isinstance(err, FormatError) and err.line is not None and err.line > 1:

@@ -7,7 +7,9 @@ work as in CVAT:
 - Enter or Escape in any field (go-to, numbers, text, dropdown) leaves it, so the next key is a hotkey again;
 - in a dropdown, focusing selects its text (typing replaces it) and Enter picks the option that matches what
   was typed (exactly, the only one left, or the first that starts with it);
-- ``?`` outside a field clicks the GUI's "shortcuts (?)" button, which opens the cheat-sheet.
+- ``?`` outside a field clicks the GUI's "shortcuts (?)" button, which opens the cheat-sheet;
+- :func:`show_tab` brings a panel tab to the front (viser's tab groups cannot be switched from Python): a
+  mode change by key shows the mode's tab.
 
 Sent with viser's ``RunJavascriptMessage`` (the mechanism viser itself uses to load plotly.js).
 """
@@ -58,3 +60,20 @@ def install_keyboard(client) -> None:
     from viser import _messages
 
     client.gui._websock_interface.queue_message(_messages.RunJavascriptMessage(source=KEYBOARD_JS))
+
+
+def show_tab(client, label: str) -> None:
+    """Bring the panel tab called ``label`` (one of the labeler's own tab names) to the front in one client."""
+    import json
+
+    from viser import _messages
+
+    # viser's tabs are dock tabs (they can be dragged): they select on a pointer press and release, not a click
+    source = ("(function () { const tab = Array.from(document.querySelectorAll('[role=\"tab\"]'))"
+              f".find((t) => (t.textContent || '').trim() === {json.dumps(str(label))});"
+              " if (!tab || tab.getAttribute('aria-selected') === 'true') return;"
+              " const o = {bubbles: true, button: 0, isPrimary: true, pointerId: 1};"
+              " tab.dispatchEvent(new PointerEvent('pointerdown', o));"
+              " tab.dispatchEvent(new PointerEvent('pointerup', o));"
+              " if (tab.getAttribute('aria-selected') !== 'true') tab.click(); })();")
+    client.gui._websock_interface.queue_message(_messages.RunJavascriptMessage(source=source))

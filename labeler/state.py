@@ -792,6 +792,26 @@ class LabelSession:
                     out[n] = q[:2] / q[2]
         return out
 
+    def offered_points(self, margin: float = 0.02) -> list[str]:
+        """The court points the point dropdown offers, in the court's order: every point clicked (to move or
+        remove it) and the others unless the clicks so far put them outside the picture (beyond ``margin`` ×
+        its size) or, calibrated, behind the camera; every point while nothing is known yet."""
+        names = self.court.point_names
+        expected = self.expected_points_px()
+        if not expected:
+            return list(names)
+        mx, my = margin * self.width, margin * self.height
+
+        def offered(n: str) -> bool:
+            if n in self.points:
+                return True
+            if n not in expected:                # behind the camera, or not on the floor's homography
+                return self.calibration is None
+            x, y = expected[n]
+            return bool(-mx <= x <= self.width + mx and -my <= y <= self.height + my)
+
+        return [n for n in names if offered(n)]
+
     def next_point(self, after: str | None = None, view_px: tuple[float, float, float, float] | None = None,
                    ) -> str | None:
         """The court point to click next: the first unplaced one (in the court's order, after ``after``)
@@ -799,7 +819,8 @@ class LabelSession:
         place is not known yet come next, then the rest. None when every point is placed."""
         names = self.court.point_names
         start = names.index(after) + 1 if after in names else 0
-        order = [n for n in names[start:] + names[:start] if n not in self.points]
+        offered = set(self.offered_points())
+        order = [n for n in names[start:] + names[:start] if n not in self.points and n in offered]
         if not order:
             return None
         x0, y0, x1, y1 = view_px or (0.0, 0.0, float(self.width), float(self.height))

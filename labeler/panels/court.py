@@ -14,7 +14,7 @@ class CourtPanel:
 
 
 def populate_court(gui, view) -> CourtPanel:
-    names = view.session.court.point_names
+    names = view.session.offered_points() or view.session.court.point_names   # the ones inside the picture
     point = gui.add_dropdown("point", names, initial_value=view.next_court_point() or names[0])
     remove = gui.add_button("remove this point")
     show = gui.add_checkbox("court model in every mode", False)

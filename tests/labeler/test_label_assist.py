@@ -129,3 +129,46 @@ def test_next_court_point_prefers_points_in_view(clip_dir):
     expected = s.expected_points_px()
     a, b = s.next_point(None, left), s.next_point(None, right)
     assert expected[a][0] <= s.width / 2 <= expected[b][0]
+
+
+def test_the_point_dropdown_offers_only_points_inside_the_picture(clip_dir):
+    """Once the clicks calibrate the camera, the court points it puts outside the picture (the padel sample's
+    near corners, the near glass and steps: 8 of 40) are not offered; clicked points always are."""
+    s = LabelSession(clip_dir)
+    assert s.offered_points() == s.court.point_names          # nothing known yet: every point
+    gt = Clip(copy_sample(clip_dir.parent / "labelled")).read_court_points().as_dict()
+    for name in ["far_left", "far_right", "near_service_left", "near_service_right", "net_post_left_top",
+                 "net_post_right_top", "glass_far_left_top"]:
+        s.set_point(name, gt[name])
+    expected = s.expected_points_px()
+    mx, my = 0.02 * s.width, 0.02 * s.height                  # a point just beyond the edge is still offered
+    outside = {n for n, (x, y) in expected.items() if not (-mx <= x <= s.width + mx and -my <= y <= s.height + my)}
+    offered = s.offered_points()
+    assert {"near_left", "near_right", "glass_near_left_top"} <= outside and len(outside) == 8
+    assert not outside & set(offered) and set(s.points) <= set(offered)
+    assert len(offered) == len(s.court.point_names) - len(outside)
+    order = s.court.point_names
+    assert offered == [n for n in order if n in offered]      # in the court's order
+    nxt = s.next_point()
+    assert nxt in offered and nxt not in s.points
+
+
+def test_pages_served_beyond_this_machine_show_paths_relative_to_the_dataset(tmp_path, port):
+    """Served on 0.0.0.0 the error page names ``clip/ball.csv``, not the server's absolute folders; on
+    localhost the whole path (the user's own machine)."""
+    from labeler.app import LabelerApp, relative_to
+
+    clip_dir = copy_sample(tmp_path / "data" / "clip", keep_labels=False)
+    err = FormatError(clip_dir / "ball.csv", f"cannot read {clip_dir / 'ball.csv'}", line=3,
+                      fix=f"compare with {clip_dir.parent / 'other' / 'ball.csv'}")
+    for host, shown in [("0.0.0.0", "clip/ball.csv"), ("127.0.0.1", str(clip_dir / "ball.csv"))]:
+        app = LabelerApp(clip_dir, host=host, port=port)
+        try:
+            text = error_markdown(Clip(clip_dir), err, app.shown_base)
+        finally:
+            app.stop()
+        assert md_escape(shown) in text and "line 3" in text
+        if host == "0.0.0.0":
+            assert str(tmp_path) not in text and md_escape("other/ball.csv") in text
+    assert relative_to(f"{tmp_path}/a/b.csv and {tmp_path}", tmp_path) == "a/b.csv and ."
+    assert relative_to("/x/y", None) == "/x/y"

@@ -1,4 +1,5 @@
-"""End to end in headless Chromium: click the ball, press event keys, place court points, reload, two tabs."""
+"""End to end in headless Chromium: click the ball, press event keys, place court points, reload (back to the
+frame and mode), two tabs."""
 from __future__ import annotations
 
 import numpy as np
@@ -49,7 +50,8 @@ def test_label_ball_event_court_points_and_reload(app_and_clip, viser_page):
 
     press(page, "m", 2)  # ball → stationary → court
     wait_until(lambda: view.mode == "court", what="court mode")
-    page.get_by_role("tab", name="Court").click()
+    court_tab = page.get_by_role("tab", name="Court")       # the panel's tab followed the mode (no click)
+    wait_until(lambda: court_tab.get_attribute("aria-selected") == "true", what="the Court tab shown by M M")
     gt_points = Clip(SAMPLE).read_court_points().as_dict()
     for name in COURT_POINTS:
         select_point(page, view, name)
@@ -74,6 +76,11 @@ def test_label_ball_event_court_points_and_reload(app_and_clip, viser_page):
     wait_for_canvas(page)
     view2 = ready_view(app, page, known=old)
     assert view2 is not view and view2.session.summary()["court_points"] == 7
+    # back where the page was: frame 3, court mode (it opened on frame 0 in ball mode)
+    wait_until(lambda: view2.shown == 3 and view2.mode == "court", what="frame 3 in court mode after the reload")
+    wait_until(lambda: "where this page was left" in page.inner_text("body"), what="the reload's notice")
+    wait_until(lambda: page.get_by_role("tab", name="Court").get_attribute("aria-selected") == "true",
+               what="the Court tab shown again after the reload")
     status = "labelled 1 (0.4 %) · events 1 · still balls 0 · court points 7"
     wait_until(lambda: status in page.inner_text("body"), what="the same counts after a reload")
     assert view2.session.calibration is not None  # the court model is drawn again from the saved points
