@@ -639,6 +639,30 @@ def shortcuts_markdown(event_labels: list[str]) -> str:
             "| key | action |\n|---|---|\n" + "\n".join(rows))
 
 
+def shorten(text: str, n: int) -> str:
+    """``text`` in at most ``n`` characters: its start and end around an ellipsis when longer."""
+    text = str(text)
+    if len(text) <= n:
+        return text
+    head = (n - 1) // 2 + (n - 1) % 2
+    return text[:head] + "…" + text[len(text) - (n - 1 - head):]
+
+
+def dataset_markdown(rows: list[dict], name_chars: int = 20, error_chars: int = 28) -> str:
+    """The Dataset panel's table (one row per :func:`labeler.state.clip_overview`), narrow enough for the
+    panel: short headers, clip names and errors shortened around an ellipsis (the clip dropdown below
+    holds the full names), every file-derived string escaped."""
+    out = ["| clip | frames | done | events | pts |", "|---|---|---|---|---|"]
+    for r in rows:
+        name = md_escape(shorten(r["clip"], name_chars))
+        if "error" in r:
+            out.append(f"| {name} | ⚠ {md_escape(shorten(r['error'], error_chars))} | | | |")
+        else:
+            out.append(f"| {name} | {r.get('frames', '?')} | {r.get('labelled_pct', 0):.0f} % | "
+                       f"{r.get('events', '?')} | {r.get('court_points', '?')} |")
+    return "\n".join(out)
+
+
 #: hosts that serve this machine only: the page may show absolute paths
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
@@ -818,13 +842,7 @@ class LabelerApp:
     def _dataset_panel(self, client) -> None:
         gui = client.gui
         with gui.add_folder("Dataset", order=0, expand_by_default=True):
-            rows = [clip_overview(c) for c in self.clips]
-            table = "| clip | frames | labelled | events | court pts |\n|---|---|---|---|---|\n" + "\n".join(
-                f"| {md_escape(r['clip'])} | {r.get('frames', '?')} | {r.get('labelled_pct', 0):.0f} % "
-                f"| {r.get('events', '?')} | {r.get('court_points', '?')} |" if "error" not in r
-                else f"| {md_escape(r['clip'])} | ⚠ {md_escape(r['error'][:80])} | | | |"
-                for r in rows)
-            gui.add_markdown(table)
+            gui.add_markdown(dataset_markdown([clip_overview(c) for c in self.clips]))
             names = [c.root.name for c in self.clips]
             pick = gui.add_dropdown("clip", names, initial_value=names[0])
             button = gui.add_button("open clip")

@@ -68,12 +68,17 @@ def show_tab(client, label: str) -> None:
 
     from viser import _messages
 
-    # viser's tabs are dock tabs (they can be dragged): they select on a pointer press and release, not a click
-    source = ("(function () { const tab = Array.from(document.querySelectorAll('[role=\"tab\"]'))"
-              f".find((t) => (t.textContent || '').trim() === {json.dumps(str(label))});"
-              " if (!tab || tab.getAttribute('aria-selected') === 'true') return;"
-              " const o = {bubbles: true, button: 0, isPrimary: true, pointerId: 1};"
+    # viser's tabs are dock tabs (they can be dragged): they select on a pointer press and release, not a
+    # click. A page still building its panel (a reload) has no tab yet: try again every 0.1 s for 10 s. The
+    # latest call wins: an earlier call's retries stop (M pressed twice must not flip back to the first tab).
+    want = json.dumps(str(label))
+    source = ("(function () { const me = {}; window.__rally3dTab = me; let tries = 0; const go = () => {"
+              " if (window.__rally3dTab !== me) return;"
+              " const tab = Array.from(document.querySelectorAll('[role=\"tab\"]'))"
+              f".find((t) => (t.textContent || '').trim() === {want});"
+              " if (tab && tab.getAttribute('aria-selected') === 'true') return;"
+              " if (tab) { const o = {bubbles: true, button: 0, isPrimary: true, pointerId: 1};"
               " tab.dispatchEvent(new PointerEvent('pointerdown', o));"
-              " tab.dispatchEvent(new PointerEvent('pointerup', o));"
-              " if (tab.getAttribute('aria-selected') !== 'true') tab.click(); })();")
+              " tab.dispatchEvent(new PointerEvent('pointerup', o)); }"
+              " if (++tries < 100) setTimeout(go, 100); }; go(); })();")
     client.gui._websock_interface.queue_message(_messages.RunJavascriptMessage(source=source))

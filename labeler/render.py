@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from .state import LabelSession
-from .viewer_common import ImagePlane
+from .viewer_common import ImagePlane, boxes_overlap
 
 OVERLAY_Z = -0.002
 """Scene z of the overlays (in front of the frame, seen from the camera on -z)."""
@@ -32,6 +32,82 @@ COLORS = {
     "glass": (120, 200, 255),
     "mesh": (170, 170, 170),
 }
+
+
+#: word → short form in a court point's label (the dropdown and the files keep the full name)
+SHORT_WORDS = {"near": "N", "far": "F", "left": "L", "right": "R", "center": "C", "centre": "C",
+               "service": "svc", "glass": "gl", "top": "top", "bottom": "bot", "high": "hi", "low": "lo",
+               "net": "net", "post": "post", "step": "step", "mesh": "mesh", "baseline": "base", "line": ""}
+
+
+def short_point_name(name: str) -> str:
+    """``near_service_left`` → ``N svc L``: a court point's label on the frame (unknown words kept)."""
+    words = [SHORT_WORDS.get(w, w) for w in str(name).split("_")]
+    return " ".join(w for w in words if w) or str(name)
+
+
+def layout_labels(points_px: dict[str, np.ndarray], texts: dict[str, str], char_px: float, line_px: float,
+                  gap_px: float, rings: int = 8) -> dict[str, tuple[np.ndarray, bool]]:
+    """Top-left corners of labels that overlap neither each other nor the other points: each label in turn
+    (the order given) takes the first free place around its point — right-below first, then the 8 directions
+    at growing distances. Returns ``{name: ((2,) corner px, moved)}``; ``moved``: beyond the first ring (draw
+    a leader line). A label with no free place keeps the first.
+
+    ``char_px``, ``line_px``: a character's width and a line's height in image pixels; ``gap_px``: the
+    distance of the first ring."""
+    boxes: list[tuple[float, float, float, float]] = []
+    pts = {n: np.asarray(p, float) for n, p in points_px.items() if np.isfinite(np.asarray(p, float)).all()}
+    r_pt = 0.6 * gap_px
+
+    def free(box) -> bool:
+        x0, y0, x1, y1 = box
+        if any(boxes_overlap(box, b) for b in boxes):
+            return False
+        return not any(x0 - r_pt < q[0] < x1 + r_pt and y0 - r_pt < q[1] < y1 + r_pt for q in pts.values())
+
+    dirs = [(1, 1), (1, -1), (-1, 1), (-1, -1), (1, 0), (-1, 0), (0, 1), (0, -1)]
+    out: dict[str, tuple[np.ndarray, bool]] = {}
+    for name, p in pts.items():
+        w, h = char_px * max(1, len(texts.get(name, name))), line_px
+        first = None
+        for k in range(1, rings + 1):
+            d = gap_px * (1.0 + 1.5 * (k - 1))
+            for dx, dy in dirs:
+                x0 = p[0] + dx * d if dx >= 0 else p[0] - d - w
+                y0 = p[1] + dy * d if dy >= 0 else p[1] - d - h
+                if dx == 0:
+                    x0 = p[0] - w / 2
+                if dy == 0:
+                    y0 = p[1] - h / 2
+                box = (x0, y0, x0 + w, y0 + h)
+                first = first or box
+                if free(box):
+                    out[name] = (np.array(box[:2]), k > 1)
+                    break
+            if name in out:
+                break
+        if name not in out:
+            out[name] = (np.array(first[:2]), False)
+            box = first
+        else:
+            x0, y0 = out[name][0]
+            box = (x0, y0, x0 + w, y0 + h)
+        boxes.append(box)
+    return out
+
+
+def leader_segments(points_px: dict[str, np.ndarray], corners: dict[str, tuple[np.ndarray, bool]],
+                    char_px: float, line_px: float, texts: dict[str, str]) -> np.ndarray:
+    """``(M, 2, 2)`` pixel segments from each moved label's point to the nearest point of its box."""
+    segs = []
+    for name, (corner, moved) in corners.items():
+        if not moved:
+            continue
+        p = np.asarray(points_px[name], float)
+        w = char_px * max(1, len(texts.get(name, name)))
+        q = np.clip(p, corner, corner + [w, line_px])
+        segs.append([p, q])
+    return np.asarray(segs, float).reshape(-1, 2, 2)
 
 
 def ring(center_px, radius_px: float, n: int = 20) -> np.ndarray:
@@ -113,20 +189,27 @@ class Overlay:
         return list(self._handles.values()) + [h for h, _ in self._labels.values()]
 
     def point_labels(self, points_px: dict[str, np.ndarray], names: list[str], offset_px: float) -> None:
-        """Court point names next to their clicked positions (text drawn by the browser, never as HTML)."""
+        """Court point names (short: :func:`short_point_name`) beside their clicked positions, laid out so
+        that none covers another or a point (:func:`layout_labels`), a leader line to each moved one (text
+        drawn by the browser, never as HTML)."""
         for name in list(self._labels):
             if name not in points_px:
                 self._labels.pop(name)[0].remove()
-        for name, px in points_px.items():
-            pos = tuple(np.round(self.plane.pixel_to_scene(np.asarray(px, float)[None] + offset_px,
-                                                           z=OVERLAY_Z)[0], 6))
+        texts = {n: short_point_name(n) for n in points_px}
+        order = sorted(points_px, key=lambda n: names.index(n) if n in names else len(names))
+        char_px, line_px = 1.0 * offset_px, 2.0 * offset_px   # the label's size at the fitted view
+        corners = layout_labels({n: points_px[n] for n in order}, texts, char_px, line_px, offset_px)
+        self.lines("point_leaders", leader_segments(points_px, corners, char_px, line_px, texts),
+                   COLORS["point"], 1.0)
+        for name, (corner, _) in corners.items():
+            pos = tuple(np.round(self.plane.pixel_to_scene(corner[None], z=OVERLAY_Z)[0], 6))
             old = self._labels.get(name)
             if old is not None and old[1] == pos:
                 continue
             if old is not None:
                 old[0].remove()
             index = names.index(name) if name in names else len(names)
-            handle = self.scene.add_label(f"{self.root}/point_names/{index}", name, position=pos,
+            handle = self.scene.add_label(f"{self.root}/point_names/{index}", texts[name], position=pos,
                                           font_screen_scale=0.8, anchor="top-left")
             self._labels[name] = (handle, pos)
 
@@ -183,7 +266,7 @@ class Overlay:
     def _court(self, session: LabelSession, show: bool, selected: str | None, r: float) -> None:
         if not show:
             for name in ("court_paint", "court_net", "court_glass", "court_mesh", "points", "reprojected",
-                         "residuals", "selected"):
+                         "residuals", "selected", "point_leaders"):
                 self.clear(name)
             self.point_labels({}, [], 0.0)
             return

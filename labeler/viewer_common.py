@@ -149,3 +149,8 @@ def set_slider_marks(handle, marks) -> None:
     new = tuple(GuiSliderMark(value=float(v), label=(str(lab) or None)) for v, lab in marks) or None
     if getattr(handle, "_marks", None) != new:
         handle._marks = new
+
+
+def boxes_overlap(a, b) -> bool:
+    """Whether two screen or image boxes ``(x0, y0, x1, y1)`` overlap (touching edges do not)."""
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]

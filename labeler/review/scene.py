@@ -16,6 +16,7 @@ import numpy as np
 from inference.camera import Camera
 from inference.court import Court, Plane
 from inference.players.skeleton import COCO17_BONES
+from labeler.viewer_common import boxes_overlap
 
 BALL_RGB = (200, 255, 0)
 FLOOR_RGB = {"padel": (30, 90, 200), "tennis": (50, 130, 80)}
@@ -147,8 +148,7 @@ def spread_labels(anchors: np.ndarray, texts: list[str], project, *, base_lift: 
         for _ in range(max_steps):
             u, v = np.asarray(project((p + (0.0, 0.0, lifts[i]))[None]), float).reshape(2)
             box = (u - half, v - LABEL_LINE_PX, u + half, v)
-            if not np.isfinite(box).all() or not any(
-                    box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in boxes):
+            if not np.isfinite(box).all() or not any(boxes_overlap(box, b) for b in boxes):
                 break
             lifts[i] += LABEL_STEP_M
         if np.isfinite(box).all():

@@ -3,6 +3,8 @@ the frame number burned into each picture, the frame stack, detector-driven navi
 events and the next court point."""
 from __future__ import annotations
 
+import html
+
 import numpy as np
 import pytest
 from label_helpers import copy_sample
@@ -172,3 +174,24 @@ def test_pages_served_beyond_this_machine_show_paths_relative_to_the_dataset(tmp
             assert str(tmp_path) not in text and md_escape("other/ball.csv") in text
     assert relative_to(f"{tmp_path}/a/b.csv and {tmp_path}", tmp_path) == "a/b.csv and ."
     assert relative_to("/x/y", None) == "/x/y"
+
+
+def test_the_dataset_table_fits_its_panel():
+    """Long clip names and errors are shortened around an ellipsis (the dropdown keeps the full names), the
+    headers are short, and a row shows at most 64 characters; file-derived text is escaped."""
+    from labeler.app import dataset_markdown, shorten
+
+    long_name = "wpt2022_master_final_women_point_0123_camera_main"
+    rows = [{"clip": long_name, "frames": 1234, "labelled_pct": 57.4, "events": 88, "court_points": 12},
+            {"clip": HOSTILE, "error": "ball.csv, line 3: x is outside [0, 1]: 1.2 — fix: write x as a fraction"}]
+    table = dataset_markdown(rows)
+    lines = table.splitlines()
+    assert lines[0] == "| clip | frames | done | events | pts |"
+    short = shorten(long_name, 20)
+    assert md_escape(long_name) not in table and md_escape(short) in table and len(short) == 20
+    assert short == "wpt2022_ma…mera_main"
+    assert "57 %" in lines[2] and "<" not in table
+    for line in lines:
+        visible = html.unescape(line.replace("\\", ""))
+        assert len(visible) <= 64, line
+    assert shorten("short", 20) == "short"

@@ -141,3 +141,31 @@ def test_a_second_fit_to_the_same_pose_does_not_wait_for_a_report(monkeypatch):
     assert fits == [1.5, 1.5, 1.5] and not view.camera_fitted
     report((0.0, 0.0, -1.7))
     assert view.camera_fitted
+
+
+def test_court_point_labels_are_short_and_never_overlap():
+    """Five points within a few pixels of each other (a far corner, the service line's ends seen edge-on):
+    their short labels are laid out without two boxes overlapping or covering a point, and each label moved
+    off its first place gets a leader line from its point."""
+    from labeler.render import layout_labels, leader_segments, short_point_name
+    from labeler.viewer_common import boxes_overlap
+
+    assert short_point_name("near_service_left") == "N svc L"
+    assert short_point_name("glass_far_left_top") == "gl F L top" and short_point_name("odd_name") == "odd name"
+    names = ["far_left", "far_service_left", "far_service_center", "far_service_right", "net_post_left_top"]
+    pts = {n: np.array([400.0 + 6 * i, 200.0 + 3 * i]) for i, n in enumerate(names)}
+    texts = {n: short_point_name(n) for n in names}
+    char, line, gap = 8.0, 16.0, 8.0
+    corners = layout_labels(pts, texts, char, line, gap)
+    boxes = {n: (c[0], c[1], c[0] + char * len(texts[n]), c[1] + line) for n, (c, _) in corners.items()}
+    for a in names:
+        for b in names:
+            if a < b:
+                assert not boxes_overlap(boxes[a], boxes[b]), (a, b)
+        for q in pts.values():
+            x0, y0, x1, y1 = boxes[a]
+            assert not (x0 < q[0] < x1 and y0 < q[1] < y1), a
+    moved = [n for n, (_, m) in corners.items() if m]
+    assert moved and len(leader_segments(pts, corners, char, line, texts)) == len(moved)
+    lone = layout_labels({"far_left": np.array([50.0, 50.0])}, texts, char, line, gap)
+    assert not lone["far_left"][1] and np.allclose(lone["far_left"][0], [58.0, 58.0])   # right-below, no leader
