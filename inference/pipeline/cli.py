@@ -5,6 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .match import MATCH_ABOVE_S, MatchParams
+
 STAGE_NAMES = ("camera", "scenes", "detect", "smooth", "players", "events", "reconstruct")
 #: former stage names --only still takes (deprecated), and the stage each now is
 STAGE_ALIASES = {"shots": "scenes"}  # the scenes stage (between the editor's cuts) before issue 43
@@ -63,6 +65,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--accelerator", default="auto", help="several clips: Lightning accelerator (default auto)")
     p.add_argument("--devices", default="1", help="several clips: Lightning devices (default 1)")
     p.add_argument("--strategy", default="auto", help="several clips: Lightning strategy (e.g. ddp)")
+    p.add_argument("--match", action="store_true",
+                   help="a whole match: find the rallies in one pass (cuts, court views, quiet moments) and write "
+                   "one clip folder per rally plus index.csv into --out; a re-run resumes (default for a video "
+                   f"longer than {MATCH_ABOVE_S / 60:.0f} min)")
+    p.add_argument("--whole", action="store_true", help="a long video as one clip (no split into rallies)")
+    p.add_argument("--min-rally", type=float, default=MatchParams.min_rally_s,
+                   help=f"--match: court views shorter than this many seconds are no rally (default "
+                   f"{MatchParams.min_rally_s:g})")
+    p.add_argument("--max-rally", type=float, default=MatchParams.max_rally_s,
+                   help="--match: a longer court view (a club camera) is split at its quietest moments (default "
+                   f"{MatchParams.max_rally_s:g} s)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -143,6 +156,29 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _is_match(source: Path, args: argparse.Namespace) -> bool:
+    """A video to split into rallies: ``--match``, or a video longer than :data:`MATCH_ABOVE_S` without
+    ``--whole``/``--start``/``--end`` (which say: one clip)."""
+    from .prepare import VIDEO_SUFFIXES, is_clip_folder, probe_video
+
+    if getattr(args, "whole", False) or args.start is not None or args.end is not None:
+        if getattr(args, "match", False):
+            raise ValueError("--match splits a whole video into rallies; leave out --whole, --start and --end")
+        return False
+    if is_clip_folder(source) or source.suffix.lower() not in VIDEO_SUFFIXES:
+        if getattr(args, "match", False):
+            raise ValueError(f"{source}: --match takes a video file (a clip folder is one rally already)")
+        return False
+    if getattr(args, "match", False):
+        return True
+    _, _, fps, n = probe_video(source)
+    if n / fps > MATCH_ABOVE_S:
+        print(f"rally3d infer: {source} is {n / fps / 60:.0f} min long: treated as a match (split into rallies); "
+              "--whole runs it as one clip", file=sys.stderr)
+        return True
+    return False
+
+
 def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace,
              only: set[str] | None = None) -> int:
     from inference.clipio import Clip
@@ -152,6 +188,15 @@ def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace,
     from .score import score
 
     source, out = item
+    if _is_match(source, args):
+        from .match import run_match
+
+        if args.mask:
+            raise ValueError("--mask auto takes one clip; a match's rallies are masked with 'mask: auto' in each "
+                             "clip.yaml, or run the rally folders again with --mask auto")
+        params = MatchParams(min_rally_s=args.min_rally, max_rally_s=args.max_rally)
+        return run_match(source, out if out is not None else Path("runs/infer") / source.stem, args.court, cfg,
+                         camera=args.camera, court_points=_court_points(args), params=params, only=only)
     prepared = prepare(source, out, args.court, args.camera, _court_points(args), Cut(args.start, args.end))
     clip = prepared.clip
     if args.mask == "auto":

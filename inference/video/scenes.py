@@ -160,7 +160,12 @@ def cut_frames(thumbs: np.ndarray, fps: float) -> list[int]:
     """Frames that start a new scene (never 0) from (N, 27, 48, 3) thumbnails (see the module docstring)."""
     if len(thumbs) < 2:
         return []
-    d = np.abs(np.diff(thumbs, axis=0)).mean(axis=(1, 2, 3))  # d[i-1]: frame i vs i-1
+    return cuts_from_diffs(np.abs(np.diff(thumbs, axis=0)).mean(axis=(1, 2, 3)), fps)
+
+
+def cuts_from_diffs(d: np.ndarray, fps: float) -> list[int]:
+    """Frames that start a new scene from ``d (N-1,)``, the mean absolute difference of each frame's thumbnail
+    to the previous one's (``d[i-1]``: frame ``i`` vs ``i-1``; a streamed video keeps only these)."""
     half = max(3, int(round(0.25 * fps)))
     cuts = []
     for i, di in enumerate(d, start=1):
