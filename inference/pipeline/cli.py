@@ -69,6 +69,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a whole match: find the rallies in one pass (cuts, court views, quiet moments) and write "
                    "one clip folder per rally plus index.csv into --out; a re-run resumes (default for a video "
                    f"longer than {MATCH_ABOVE_S / 60:.0f} min)")
+    p.add_argument("--rallies", help="--match: run only these rallies now, by their number in index.csv (3 or "
+                   "1-3,7); the others keep their status")
     p.add_argument("--whole", action="store_true", help="a long video as one clip (no split into rallies)")
     p.add_argument("--min-rally", type=float, default=MatchParams.min_rally_s,
                    help=f"--match: court views shorter than this many seconds are no rally (default "
@@ -189,14 +191,17 @@ def _run_one(item: tuple[Path, Path | None], cfg, args: argparse.Namespace,
 
     source, out = item
     if _is_match(source, args):
-        from .match import run_match
+        from .match import parse_rallies, run_match
 
         if args.mask:
             raise ValueError("--mask auto takes one clip; a match's rallies are masked with 'mask: auto' in each "
                              "clip.yaml, or run the rally folders again with --mask auto")
         params = MatchParams(min_rally_s=args.min_rally, max_rally_s=args.max_rally)
         return run_match(source, out if out is not None else Path("runs/infer") / source.stem, args.court, cfg,
-                         camera=args.camera, court_points=_court_points(args), params=params, only=only)
+                         camera=args.camera, court_points=_court_points(args), params=params, only=only,
+                         rallies=parse_rallies(args.rallies))
+    if getattr(args, "rallies", None):
+        raise ValueError("--rallies picks rallies of a match: add --match (a video file)")
     prepared = prepare(source, out, args.court, args.camera, _court_points(args), Cut(args.start, args.end))
     clip = prepared.clip
     if args.mask == "auto":

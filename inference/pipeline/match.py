@@ -57,12 +57,16 @@ class MatchParams:
         min_rally_s: a court view shorter than this is not a rally (a glimpse between replays).
         max_rally_s: a longer court view (a club camera that never cuts) is split at its quietest moments.
         quiet_s: seconds over which the picture's motion is averaged to find the quietest moment.
+        pause_s, pause_ratio: a court view is also cut in every pause at least ``pause_s`` long whose motion
+            stays below ``pause_ratio`` × the view's median (the players walking back between points).
         block_s: the scan keeps one mean thumbnail per this many seconds (what tells court views).
     """
 
     min_rally_s: float = 4.0
     max_rally_s: float = 90.0
     quiet_s: float = 1.0
+    pause_s: float = 3.0
+    pause_ratio: float = 0.3
     block_s: float = 0.5
 
     def __post_init__(self) -> None:
@@ -195,16 +199,43 @@ def scan_video(video: Path, params: MatchParams | None = None, progress: Callabl
                 block, float(fps), seen)
 
 
+def quiet_runs(motion: np.ndarray, a: int, b: int, below: float, min_len: int) -> list[tuple[int, int]]:
+    """``[(first, stop), ...]``: stretches of frames ``a .. b-1`` at least ``min_len`` long whose ``motion`` is
+    below ``below``."""
+    low = np.concatenate([[False], motion[a:b] < below, [False]])
+    edges = np.flatnonzero(np.diff(low.astype(np.int8)))
+    return [(a + s, a + e) for s, e in zip(edges[::2], edges[1::2]) if e - s >= min_len]
+
+
+def split_view(a: int, b: int, motion: np.ndarray, fps: float, params: MatchParams) -> list[tuple[int, int]]:
+    """Frames ``a .. b-1`` of one court view as rallies: cut in the middle of every pause (``pause_s`` or more
+    with the picture's motion below ``pause_ratio`` × the view's median: the players walking back between
+    points), no piece shorter than ``min_rally_s``; a piece still longer than ``max_rally_s`` is cut at its
+    quietest moment (:func:`split_long`)."""
+    lo = int(round(params.min_rally_s * fps))
+    cuts = [a]
+    below = params.pause_ratio * float(np.median(motion[a:b])) if b > a else 0.0
+    for s, e in quiet_runs(motion, a, b, below, int(round(params.pause_s * fps))):
+        c = int((s + e) // 2)
+        if c - cuts[-1] >= lo and b - c >= lo:
+            cuts.append(c)
+    bounds = [*cuts, b]
+    return [p for x, y in zip(bounds[:-1], bounds[1:]) for p in split_long(x, y, motion, fps, params)]
+
+
 def split_long(a: int, b: int, motion: np.ndarray, fps: float, params: MatchParams) -> list[tuple[int, int]]:
-    """Frames ``a .. b-1`` of one court view in pieces of ``min_rally_s .. max_rally_s``, each cut at the
-    quietest frame (least ``motion``) that leaves both sides long enough."""
+    """Frames ``a .. b-1`` in pieces of ``min_rally_s .. max_rally_s``: while a piece is too long it is cut in
+    the middle of its quietest stretch (least ``motion``; of equally quiet ones the nearest the middle) that
+    leaves both sides at least ``min_rally_s``."""
     lo, hi = int(round(params.min_rally_s * fps)), int(round(params.max_rally_s * fps))
     if b - a <= hi:
         return [(a, b)]
-    # the first piece ends at the quietest frame in [a + lo, a + hi], and the rest must stay ≥ lo long
-    first, last = a + lo, min(a + hi, b - lo)
-    cut = first + int(np.argmin(motion[first:last + 1]))
-    return [(a, cut), *split_long(cut, b, motion, fps, params)]
+    first, last = a + lo, b - lo
+    m = motion[first:last + 1]
+    calm = quiet_runs(m, 0, len(m), float(m.min()) + 1e-6 + 0.05 * float(np.ptp(m)), 1)
+    middle = (len(m) - 1) / 2
+    cut = first + int(min(((s + e - 1) // 2 for s, e in calm), key=lambda x: abs(x - middle)))
+    return [*split_long(a, cut, motion, fps, params), *split_long(cut, b, motion, fps, params)]
 
 
 def plan_rallies(scan: Scan, params: MatchParams | None = None) -> list[Rally]:
@@ -214,8 +245,8 @@ def plan_rallies(scan: Scan, params: MatchParams | None = None) -> list[Rally]:
     spans: list[tuple[int, int]] = []
     for a, b, court_view, _ in scan.scenes():
         if court_view and (b - a) >= params.min_rally_s * scan.fps:
-            spans.extend(split_long(a, b, motion, scan.fps, params))
-    return [Rally(k + 1, a, b) for k, (a, b) in enumerate(spans)]
+            spans.extend(split_view(a, b, motion, scan.fps, params))
+    return [Rally(k + 1, int(a), int(b)) for k, (a, b) in enumerate(spans)]
 
 
 # ------------------------------------------------------------------------------------------ the index
@@ -230,6 +261,7 @@ class MatchIndex:
     n_frames: int
     scenes: list = field(default_factory=list)
     rallies: list[Rally] = field(default_factory=list)
+    stages: str = "all"
     version: int = MATCH_VERSION
 
     def write(self, out: Path) -> None:
@@ -268,6 +300,25 @@ class MatchIndex:
         play = sum(r.n_frames for r in self.rallies) / self.fps
         return (f"{len(self.rallies)} rallies ({play / 60:.1f} min of {self.n_frames / self.fps / 60:.1f} min of video): "
                 + ", ".join(f"{v} {k}" for k, v in n.items() if v))
+
+
+def parse_rallies(text: str | None) -> set[int] | None:
+    """``--rallies 1-3,7`` → ``{1, 2, 3, 7}`` (None: every rally); a clear error for anything else."""
+    if text is None:
+        return None
+    out: set[int] = set()
+    try:
+        for part in filter(None, (p.strip() for p in str(text).split(","))):
+            a, _, b = part.partition("-")
+            lo, hi = int(a), int(b or a)
+            if lo < 1 or hi < lo:
+                raise ValueError
+            out.update(range(lo, hi + 1))
+    except ValueError:
+        raise ValueError(f"--rallies {text!r}: give rally numbers from 1, like 3 or 1-3,7") from None
+    if not out:
+        raise ValueError(f"--rallies {text!r}: give rally numbers from 1, like 3 or 1-3,7")
+    return out
 
 
 def _num(v: float | None, nd: int = 2) -> str:
@@ -322,8 +373,15 @@ class Throughput:
 
 
 # ---------------------------------------------------------------------------------------------- the run
-def load_or_plan(video: Path, out: Path, params: MatchParams, log: MatchLog) -> MatchIndex:
-    """The index of a previous run on the same video with the same split, or a fresh scan and plan."""
+def stages_key(only: set[str] | None) -> str:
+    """How ``match.json`` records the stages a run ran (``--only``): ``all`` or ``camera,scenes``."""
+    return "all" if only is None else ",".join(sorted(only))
+
+
+def load_or_plan(video: Path, out: Path, params: MatchParams, log: MatchLog, only: set[str] | None = None
+                 ) -> MatchIndex:
+    """The index of a previous run on the same video with the same split, or a fresh scan and plan. A run
+    with other stages (``--only``) than the previous one runs every rally again (its finished stages reused)."""
     from .state import fingerprint
 
     fp = fingerprint(video) or ""
@@ -331,6 +389,13 @@ def load_or_plan(video: Path, out: Path, params: MatchParams, log: MatchLog) -> 
     if path.is_file():
         old = MatchIndex.read(path)
         if old.fingerprint == fp and old.params == asdict(params):
+            if old.stages != stages_key(only):
+                log(f"rally3d infer: {path} was run with stages {old.stages}, now {stages_key(only)}: every rally "
+                    "runs again (stages already done are reused)")
+                for r in old.rallies:
+                    r.status = "pending" if r.status == "done" else r.status
+                old.stages = stages_key(only)
+                return old
             done = sum(r.status == "done" for r in old.rallies)
             log(f"rally3d infer: resuming {path}: {done} of {len(old.rallies)} rallies done")
             return old
@@ -350,7 +415,7 @@ def load_or_plan(video: Path, out: Path, params: MatchParams, log: MatchLog) -> 
     scan = scan_video(video, params, tick)
     rallies = plan_rallies(scan, params)
     index = MatchIndex(str(video), fp, asdict(params), scan.fps, scan.n_frames,
-                       [list(s) for s in scan.scenes()], rallies)
+                       [list(s) for s in scan.scenes()], rallies, stages_key(only))
     index.write(out)
     log(f"[scan] {len(index.scenes)} scenes, {sum(s[2] for s in index.scenes)} court views → {index.summary()} "
         f"(took {duration(time.perf_counter() - t0)}); the split: {out / INDEX_FILE}")
@@ -382,11 +447,12 @@ def _rally_facts(clip, rally: Rally, fps: float) -> None:
 
 def run_match(video: Path, out: Path, court: str, cfg, *, camera: Path | None = None,
               court_points: Path | None = None, params: MatchParams | None = None, only: set[str] | None = None,
-              quiet: bool = False, run_one: Callable | None = None) -> int:
+              rallies: set[int] | None = None, quiet: bool = False, run_one: Callable | None = None) -> int:
     """Split ``video`` into rallies and run the pipeline on each (module docstring). Returns the exit code:
     0 when every rally is done, 1 when some are incomplete or failed (the others are kept), 130 on Ctrl-C.
 
-    ``only``: the stages to run (``--only``); ``run_one(clip, cfg, only=, log=)`` → a report with ``ok``,
+    ``only``: the stages to run (``--only``); ``rallies``: run only these rally numbers now (``--rallies``; the
+    others keep their status); ``run_one(clip, cfg, only=, log=)`` → a report with ``ok``,
     ``stages`` and ``table()``: the pipeline (default :func:`inference.pipeline.run.run_pipeline`)."""
     from inference.clipio import FormatError
 
@@ -403,13 +469,16 @@ def run_match(video: Path, out: Path, court: str, cfg, *, camera: Path | None = 
     try:
         log(f"rally3d infer: {video} is a match: split into rallies, one clip folder each in {out} "
             f"(log: {out / LOG_FILE})")
-        index = load_or_plan(Path(video), out, params, log)
-        todo = [r for r in index.rallies if r.status != "done"]
+        index = load_or_plan(Path(video), out, params, log, only)
+        if rallies is not None:
+            unknown = sorted(set(rallies) - {r.rally for r in index.rallies})
+            if unknown:
+                raise ValueError(f"--rallies {','.join(map(str, unknown))}: the match has rallies 1–"
+                                 f"{len(index.rallies)} (see {out / INDEX_FILE})")
+        todo = [r for r in index.rallies if r.status != "done" and (rallies is None or r.rally in rallies)]
         meter = Throughput(sum(r.n_frames for r in todo))
         fps = index.fps
-        for r in index.rallies:
-            if r.status == "done":
-                continue
+        for r in todo:
             t0 = time.perf_counter()
             where = f"rally {r.rally}/{len(index.rallies)} ({r.first_frame / fps:.1f}–{r.stop_frame / fps:.1f} s)"
             try:
@@ -436,6 +505,7 @@ def run_match(video: Path, out: Path, court: str, cfg, *, camera: Path | None = 
             log(f"{where} {r.status}" + (f" ({r.note})" if r.note else "") +
                 f" in {duration(r.seconds)}; {meter.done}/{meter.total} frames, {meter.line()}")
         log(f"rally3d infer: {index.summary()}; index: {out / INDEX_FILE}")
-        return 0 if all(r.status == "done" for r in index.rallies) else 1
+        asked = [r for r in index.rallies if rallies is None or r.rally in rallies]
+        return 0 if all(r.status == "done" for r in asked) else 1
     finally:
         log.close()
