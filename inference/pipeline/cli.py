@@ -78,6 +78,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-rally", type=float, default=MatchParams.max_rally_s,
                    help="--match: a longer court view (a club camera) is split at its quietest moments (default "
                    f"{MatchParams.max_rally_s:g} s)")
+    p.add_argument("--workers", help="several inputs (or a folder of videos): run them in N worker processes of a "
+                   "local Dask cluster (auto: one per CPU core), one input per worker at a time")
+    p.add_argument("--cluster", metavar="ADDRESS", help="send the inputs to a running Dask scheduler (tcp://HOST:8786) "
+                   "whose workers may be on other machines; inputs and --out must be on a folder every machine sees "
+                   "at the same path (docs/pipeline.md)")
+    p.add_argument("--threads", type=int, default=1, help="--workers/--cluster: torch threads per worker (default 1)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -104,9 +110,17 @@ def _expand(args: argparse.Namespace) -> list[tuple[Path, Path | None]]:
     from inference.clipio import Manifest
 
     items: list[tuple[Path, Path | None]] = []
+    from .prepare import VIDEO_SUFFIXES
+
     for path in args.inputs:
         if path.is_dir() and (path / "manifest.yaml").is_file():
             items += [(Path(c), None) for c in Manifest.load(path).paths(args.split)]
+        elif path.is_dir() and not (path / "clip.yaml").is_file():
+            videos = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
+            if not videos:
+                raise ValueError(f"{path}: a folder with no clip.yaml, no manifest.yaml and no video file "
+                                 f"({', '.join(sorted(VIDEO_SUFFIXES))}); give a video, a clip folder or a dataset")
+            items += [(v, None) for v in videos]
         else:
             items.append((path, None))
     if len(items) > 1 and args.out is not None:
@@ -138,6 +152,8 @@ def run(args: argparse.Namespace) -> int:
     if not items:
         raise ValueError("no clips to run (empty dataset or split)")
     only = _only_stages(args.only)
+    if args.workers or args.cluster:
+        return _run_distributed(items, cfg, args, only)
     if len(items) == 1:
         return _run_one(items[0], cfg, args, only)
     if args.start is not None or args.end is not None:
@@ -155,6 +171,40 @@ def run(args: argparse.Namespace) -> int:
         print(r.get("table") or r.get("error", ""))
         failed += not r["ok"]
     print(f"\n{len(results) - failed}/{len(results)} clips complete")
+    return 1 if failed else 0
+
+
+def _run_distributed(items, cfg, args: argparse.Namespace, only: set[str] | None) -> int:
+    """``--workers`` / ``--cluster``: every input a task of a Dask cluster (:mod:`.distributed`)."""
+    import os
+    from dataclasses import asdict
+
+    from .distributed import ItemJob, run_items
+
+    if args.start is not None or args.end is not None or args.mask or args.rallies:
+        raise ValueError("--start/--end, --mask and --rallies take one input without --workers/--cluster")
+    workers = None
+    if args.workers:
+        if args.cluster:
+            raise ValueError("--workers starts a local cluster, --cluster uses a running one: give one of them")
+        w = str(args.workers)
+        if w != "auto" and (not w.isdigit() or int(w) < 1):
+            raise ValueError(f"--workers {w!r}: a number of processes ≥ 1, or auto (one per CPU core)")
+        workers = (os.cpu_count() or 1) if w == "auto" else int(w)
+    params = asdict(MatchParams(min_rally_s=args.min_rally, max_rally_s=args.max_rally))
+    jobs = [ItemJob(str(src), None if dest is None else str(dest), args.court,
+                    None if args.camera is None else str(args.camera),
+                    None if _court_points(args) is None else str(_court_points(args)),
+                    None if only is None else tuple(sorted(only)),
+                    True if args.match else (False if args.whole else None), params, max(0, int(args.threads)))
+            for src, dest in items]
+    results = run_items(jobs, cfg, workers=workers, address=args.cluster)
+    failed = 0
+    for r in results:
+        print(f"\n== {r['input']} → {r.get('clip', '-')}: {'ok' if r.get('ok') else 'INCOMPLETE'}")
+        print(r.get("table") or r.get("error", ""))
+        failed += not r.get("ok")
+    print(f"\n{len(results) - failed}/{len(results)} inputs complete")
     return 1 if failed else 0
 
 
