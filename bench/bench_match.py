@@ -138,7 +138,8 @@ def main() -> int:
     ap.add_argument("--minutes", type=float, default=30.0)
     ap.add_argument("--full", type=int, default=2, help="rallies run through the whole pipeline (0: none)")
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_match")
-    ap.add_argument("--reuse", action="store_true", help="keep the match video and the output of an earlier run")
+    ap.add_argument("--reuse", action="store_true", help="keep the match video of an earlier run (the result is "
+                    "always made afresh)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     video, result = args.out / "match.mp4", args.out / "result"
@@ -146,10 +147,10 @@ def main() -> int:
     fps = 30.0
     points_file = args.out / "points.csv"
     t0 = time.perf_counter()
-    if not (args.reuse and video.is_file() and points_file.is_file()):
-        import shutil
+    import shutil
 
-        shutil.rmtree(result, ignore_errors=True)
+    shutil.rmtree(result, ignore_errors=True)
+    if not (args.reuse and video.is_file() and points_file.is_file()):
         points, n = build_match(video, args.minutes, fps, frames)
         with open(points_file, "w", newline="") as f:
             csv.writer(f).writerows(points)

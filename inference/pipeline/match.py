@@ -8,9 +8,10 @@ mean difference of its 48×27 thumbnail to the previous frame's, and one mean th
    rule as a clip's ``scenes.json``);
 2. keeps the court views: the scenes that look like the main view (the longest scene), within
    :data:`inference.video.scenes.SIMILAR_MAX` grey levels of it; replays, close-ups and crowd shots are left out;
-3. drops court views shorter than ``min_rally_s`` (a glimpse between two replays is no rally) and splits one
-   longer than ``max_rally_s`` (a club camera never cuts) at its quietest second — least motion in the picture,
-   the players walking back between points — into stretches of ``min_rally_s .. max_rally_s``.
+3. drops court views shorter than ``min_rally_s`` (a glimpse between two replays is no rally), cuts a court view
+   in the middle of every pause (the players walking back between points: the picture's motion low for
+   ``pause_s``; a piece that is nearly all pause is dropped) and splits a piece still longer than ``max_rally_s``
+   (a club camera never cuts) at its quietest second, into stretches of ``min_rally_s .. max_rally_s``.
 
 Each stretch becomes a clip folder ``rally_NNN/`` under the output folder (its frames re-encoded, as
 ``--start/--end`` writes them) and runs through the whole pipeline; the rally segmentation of the events stage
@@ -58,7 +59,8 @@ class MatchParams:
         max_rally_s: a longer court view (a club camera that never cuts) is split at its quietest moments.
         quiet_s: seconds over which the picture's motion is averaged to find the quietest moment.
         pause_s, pause_ratio: a court view is also cut in every pause at least ``pause_s`` long whose motion
-            stays below ``pause_ratio`` × the view's median (the players walking back between points).
+            stays below ``pause_ratio`` × the view's median (the players walking back between points); a piece
+            of a view cut so that is dropped when ``still_share`` of its frames or more are that still.
         block_s: the scan keeps one mean thumbnail per this many seconds (what tells court views).
     """
 
@@ -67,6 +69,7 @@ class MatchParams:
     quiet_s: float = 1.0
     pause_s: float = 3.0
     pause_ratio: float = 0.3
+    still_share: float = 0.8
     block_s: float = 0.5
 
     def __post_init__(self) -> None:
@@ -220,7 +223,11 @@ def split_view(a: int, b: int, motion: np.ndarray, fps: float, params: MatchPara
         if c - cuts[-1] >= lo and b - c >= lo:
             cuts.append(c)
     bounds = [*cuts, b]
-    return [p for x, y in zip(bounds[:-1], bounds[1:]) for p in split_long(x, y, motion, fps, params)]
+    pieces = [p for x, y in zip(bounds[:-1], bounds[1:]) for p in split_long(x, y, motion, fps, params)]
+    if len(bounds) == 2:
+        return pieces
+    # between two pauses that a jump of the picture splits (the light changes), a piece that is all pause
+    return [(x, y) for x, y in pieces if np.mean(motion[x:y] < below) < params.still_share]
 
 
 def split_long(a: int, b: int, motion: np.ndarray, fps: float, params: MatchParams) -> list[tuple[int, int]]:

@@ -89,6 +89,13 @@ def test_a_long_view_is_split_at_its_quietest_moments():
     for c, (a, b) in zip(cuts, quiet):
         assert a <= c <= b, (cuts, quiet)
     lengths = [r.n_frames / FPS for r in plan]
+    # a pause split in two (the light changes) leaves no empty rally between its halves
+    jumpy = diffs.copy()
+    jumpy[int(100 * FPS):int(114 * FPS)] = 0.2   # a 14 s pause (108–113 was one) …
+    jumpy[int(107 * FPS):int(107 * FPS) + 20] = 3.0  # … with a change of light in its middle (no cut)
+    plan2 = M.plan_rallies(M.Scan(jumpy, scan.blocks, 15, FPS, n), M.MatchParams(min_rally_s=4, max_rally_s=90))
+    assert len(plan2) == 4 and all(r.n_frames >= 40 * FPS for r in plan2), [(r.first_frame / FPS, r.n_frames / FPS)
+                                                                          for r in plan2]
     assert all(4 <= s <= 90 for s in lengths) and sum(r.n_frames for r in plan) == n
     # no pause: a view over max_rally_s is cut at its quietest second, in the middle of it
     busy = (3.0 + rng.random(n - 1)).astype(np.float32)
