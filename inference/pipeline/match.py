@@ -476,7 +476,16 @@ def run_match(video: Path, out: Path, court: str, cfg, *, camera: Path | None = 
     try:
         log(f"rally3d infer: {video} is a match: split into rallies, one clip folder each in {out} "
             f"(log: {out / LOG_FILE})")
-        index = load_or_plan(Path(video), out, params, log, only)
+        try:
+            index = load_or_plan(Path(video), out, params, log, only)
+        except KeyboardInterrupt:
+            log("rally3d infer: stopped during the scan (nothing written yet); re-run the same command to start again")
+            return 130
+        if not index.rallies:
+            log(f"rally3d infer: no rally found in {video}: no court view of {params.min_rally_s:g} s or more "
+                f"({len(index.scenes)} scenes, {sum(bool(s[2]) for s in index.scenes)} court views; see "
+                f"{out / MATCH_FILE}). Lower --min-rally, or run it as one clip with --whole")
+            return 1
         if rallies is not None:
             unknown = sorted(set(rallies) - {r.rally for r in index.rallies})
             if unknown:

@@ -194,6 +194,15 @@ def test_match_resumes_after_an_interruption_and_goes_on_after_a_failure(match_v
     assert rows[1]["note"] == "the detector ran out of memory"
 
 
+def test_a_match_with_no_court_view_long_enough_says_so(match_video, tmp_path, capsys):
+    video, _ = match_video
+    out = tmp_path / "none"
+    assert main(["infer", str(video), "--match", "--court", "tennis", "--only", "scenes", "--min-rally", "30",
+                 "--max-rally", "90", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "no rally found" in err and "no court view of 30 s or more" in err and "--whole" in err
+
+
 def test_a_long_video_is_a_match_unless_whole(match_video, tmp_path, monkeypatch, capsys):
     from inference.pipeline import cli
 
