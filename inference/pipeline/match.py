@@ -60,7 +60,7 @@ class MatchParams:
         quiet_s: seconds over which the picture's motion is averaged to find the quietest moment.
         pause_s, pause_ratio: a court view is also cut in every pause at least ``pause_s`` long whose motion
             stays below ``pause_ratio`` × the view's median (the players walking back between points); a piece
-            of a view cut so that is dropped when ``still_share`` of its frames or more are that still.
+            of a view cut so whose median motion is that low is a pause, not a rally: dropped.
         block_s: the scan keeps one mean thumbnail per this many seconds (what tells court views).
     """
 
@@ -69,7 +69,6 @@ class MatchParams:
     quiet_s: float = 1.0
     pause_s: float = 3.0
     pause_ratio: float = 0.3
-    still_share: float = 0.8
     block_s: float = 0.5
 
     def __post_init__(self) -> None:
@@ -226,8 +225,9 @@ def split_view(a: int, b: int, motion: np.ndarray, fps: float, params: MatchPara
     pieces = [p for x, y in zip(bounds[:-1], bounds[1:]) for p in split_long(x, y, motion, fps, params)]
     if len(bounds) == 2:
         return pieces
-    # between two pauses that a jump of the picture splits (the light changes), a piece that is all pause
-    return [(x, y) for x, y in pieces if np.mean(motion[x:y] < below) < params.still_share]
+    # a pause split in two (the light changes, the players cross the picture) leaves a piece between its halves
+    # that is pause all the same: as still as a pause for most of its frames (its median)
+    return [(x, y) for x, y in pieces if np.median(motion[x:y]) >= below]
 
 
 def split_long(a: int, b: int, motion: np.ndarray, fps: float, params: MatchParams) -> list[tuple[int, int]]:
