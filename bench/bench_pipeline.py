@@ -4,7 +4,7 @@ Runs the whole pipeline (camera, detect, smooth, events, players with MoveNet, r
 output folder, prints the per-stage table with the slowest stage named, and the scores against the sample's
 ground truth. With ``--device cuda`` it measures the GPU (where one is lent).
 
-    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1]
+    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1] [--detector-backend auto|torch|onnx]
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ def main() -> int:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--pose", default="movenet")
     ap.add_argument("--batch-size", type=int, default=1)
+    ap.add_argument("--detector-backend", default="auto", choices=["auto", "torch", "onnx"])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_pipeline")
     args = ap.parse_args()
 
@@ -33,7 +34,8 @@ def main() -> int:
     if args.out.exists():
         shutil.rmtree(args.out)
     prepared = prepare(SAMPLE, args.out, None)
-    cfg = PipelineConfig(pose=args.pose, device=args.device, batch_size=args.batch_size, progress=False)
+    cfg = PipelineConfig(pose=args.pose, device=args.device, batch_size=args.batch_size, progress=False,
+                         detector_backend=args.detector_backend)
     report = run_pipeline(prepared.clip, cfg, log=lambda *_: None)
     import torch
 

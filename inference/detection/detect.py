@@ -100,8 +100,9 @@ class BallDetectorRunner:
         frames_in: F; net_size: (H, W); normalize: ``imagenet`` or ``unit``.
         step: window step in frames (``frames_in``: non-overlapping; 1: pooled overlapping windows).
         batch_size: windows per forward pass (full-frame windows; crop-tracking runs one at a time).
-        backend: ``torch`` (eager PyTorch) or ``onnx`` (ONNX Runtime, CPU; exported and cached on first use,
-            :mod:`.engine`).
+        backend: ``torch`` (eager PyTorch: the library's default, what training's evaluation compares against),
+            ``onnx`` (ONNX Runtime, CPU; exported and cached on first use, :mod:`.engine`) or ``auto`` (ONNX Runtime
+            on the CPU where installed, else eager PyTorch: the default of ``rally3d infer`` and ``rally3d detect``).
         crop: :class:`~.crop.CropConfig` for crop-tracking, ``None`` for the full frame everywhere.
         fold_bn: fold batch norms into the convolutions (an inference copy of ``model``).
     """

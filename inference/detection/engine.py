@@ -26,7 +26,7 @@ from torch import nn
 
 log = logging.getLogger(__name__)
 
-BACKENDS = ("torch", "onnx")
+BACKENDS = ("auto", "torch", "onnx")
 #: bump when the exported graph changes for the same weights (a new opset, sigmoid inside or not, ...)
 EXPORT_VERSION = 1
 OPSET = 17
@@ -139,9 +139,28 @@ def cached_onnx(model: nn.Module, frames_in: int, directory: str | os.PathLike |
     return path
 
 
-def make_engine(model: nn.Module, backend: str = "torch", frames_in: int = 3, device: str = "cpu",
+def onnx_available() -> bool:
+    """Whether ONNX Runtime and the exporter are installed (``rally3d[onnx]``; ``make`` installs them)."""
+    try:
+        require_onnxruntime()
+    except RuntimeError:
+        return False
+    return True
+
+
+def resolve_backend(backend: str, device: str = "cpu") -> str:
+    """``auto`` → ``onnx`` on the CPU where ONNX Runtime is installed (1.5× eager PyTorch with crop-tracking,
+    heatmaps within 1e-4, the same F1: docs/detectors.md#speed), else ``torch``; other names unchanged."""
+    if backend == "auto":
+        return "onnx" if device == "cpu" and onnx_available() else "torch"
+    return backend
+
+
+def make_engine(model: nn.Module, backend: str = "auto", frames_in: int = 3, device: str = "cpu",
                 onnx_dir: str | os.PathLike | None = None):
-    """A :class:`TorchEngine` or :class:`OnnxEngine` (exported and cached on first use) for ``model``."""
+    """A :class:`TorchEngine` or :class:`OnnxEngine` (exported and cached on first use) for ``model``;
+    ``backend`` ``auto``: :func:`resolve_backend`."""
+    backend = resolve_backend(backend, device)
     if backend == "torch":
         return TorchEngine(model, device)
     if backend == "onnx":

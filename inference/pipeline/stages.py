@@ -41,7 +41,7 @@ class PipelineConfig:
         detector: ``wasb``, ``tracknetv2`` or ``monotrack``; detector_weights: checkpoint (None: shipped).
         trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
-        detector_backend: ``torch`` or ``onnx`` (ONNX Runtime); detector_crop: crop-tracking ``auto`` or ``off``.
+        detector_backend: ``auto`` (ONNX Runtime on the CPU where installed), ``torch`` or ``onnx``; detector_crop: crop-tracking ``auto`` or ``off``.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
         rally_only: leave the events judged outside the point (warm-up bounces, the ball after it) out of
             events.csv (rally.yaml lists them either way).
@@ -59,7 +59,7 @@ class PipelineConfig:
     trust_checkpoint: bool = False
     step: int = 3
     batch_size: int = 1
-    detector_backend: str = "torch"
+    detector_backend: str = "auto"
     detector_crop: str = "auto"
     events: Path | None = None
     rally_only: bool = False
@@ -74,8 +74,8 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         if self.step < 1 or self.batch_size < 1:
             raise ValueError(f"step and batch_size must be ≥ 1, got {self.step}, {self.batch_size}")
-        if self.detector_backend not in ("torch", "onnx") or self.detector_crop not in ("auto", "off"):
-            raise ValueError(f"detector_backend must be torch or onnx and detector_crop auto or off, got "
+        if self.detector_backend not in ("auto", "torch", "onnx") or self.detector_crop not in ("auto", "off"):
+            raise ValueError(f"detector_backend must be auto, torch or onnx and detector_crop auto or off, got "
                              f"{self.detector_backend!r}, {self.detector_crop!r}")
 
 

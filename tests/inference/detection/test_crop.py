@@ -120,7 +120,7 @@ def test_crop_flags_reach_the_runner_from_detect_and_infer():
     register_detect(sub)
     register_infer(sub)
     args = parser.parse_args(["detect", "clip"])
-    assert (args.crop, args.backend) == ("auto", "torch")   # crop-tracking is the default
+    assert (args.crop, args.backend) == ("auto", "auto")   # crop-tracking and ONNX-where-installed: the defaults
     args = parser.parse_args(["detect", "clip", "--crop", "off", "--backend", "onnx"])
     assert (args.crop, args.backend) == ("off", "onnx")
     cfg = _config(parser.parse_args(["infer", "v.mp4", "--detector-crop", "off", "--detector-backend", "onnx"]))
