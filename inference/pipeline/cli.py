@@ -110,9 +110,9 @@ def _expand(args: argparse.Namespace) -> list[tuple[Path, Path | None]]:
     """(input, output) per clip; dataset folders expand to their clips."""
     from inference.clipio import Manifest
 
-    items: list[tuple[Path, Path | None]] = []
     from .prepare import VIDEO_SUFFIXES
 
+    items: list[tuple[Path, Path | None]] = []
     for path in args.inputs:
         if path.is_dir() and (path / "manifest.yaml").is_file():
             items += [(Path(c), None) for c in Manifest.load(path).paths(args.split)]
@@ -166,12 +166,17 @@ def run(args: argparse.Namespace) -> int:
     devices = int(args.devices) if str(args.devices).isdigit() else args.devices
     results = predict_clips(items, cfg, court=args.court, camera=args.camera, court_points=_court_points(args),
                             accelerator=args.accelerator, devices=devices, strategy=args.strategy)
+    return _print_results(results, "clips")
+
+
+def _print_results(results: list[dict], noun: str) -> int:
+    """Each input's summary (its table or error) and the count complete; the exit code (1 if any is not)."""
     failed = 0
     for r in results:
-        print(f"\n== {r['input']} → {r.get('clip', '-')}: {'ok' if r['ok'] else 'INCOMPLETE'}")
+        print(f"\n== {r['input']} → {r.get('clip', '-')}: {'ok' if r.get('ok') else 'INCOMPLETE'}")
         print(r.get("table") or r.get("error", ""))
-        failed += not r["ok"]
-    print(f"\n{len(results) - failed}/{len(results)} clips complete")
+        failed += not r.get("ok")
+    print(f"\n{len(results) - failed}/{len(results)} {noun} complete")
     return 1 if failed else 0
 
 
@@ -199,35 +204,27 @@ def _run_distributed(items, cfg, args: argparse.Namespace, only: set[str] | None
                     None if only is None else tuple(sorted(only)),
                     True if args.match else (False if args.whole else None), params, max(0, int(args.threads)))
             for src, dest in items]
-    results = run_items(jobs, cfg, workers=workers, address=args.cluster)
-    failed = 0
-    for r in results:
-        print(f"\n== {r['input']} → {r.get('clip', '-')}: {'ok' if r.get('ok') else 'INCOMPLETE'}")
-        print(r.get("table") or r.get("error", ""))
-        failed += not r.get("ok")
-    print(f"\n{len(results) - failed}/{len(results)} inputs complete")
-    return 1 if failed else 0
+    return _print_results(run_items(jobs, cfg, workers=workers, address=args.cluster), "inputs")
 
 
 def _is_match(source: Path, args: argparse.Namespace) -> bool:
     """A video to split into rallies: ``--match``, or a video longer than :data:`MATCH_ABOVE_S` without
     ``--whole``/``--start``/``--end`` (which say: one clip)."""
-    from .prepare import VIDEO_SUFFIXES, is_clip_folder, probe_video
-
     if getattr(args, "whole", False) or args.start is not None or args.end is not None:
         if getattr(args, "match", False):
             raise ValueError("--match splits a whole video into rallies; leave out --whole, --start and --end")
         return False
-    if is_clip_folder(source) or source.suffix.lower() not in VIDEO_SUFFIXES:
+    from .match import is_long_video, is_video_file
+
+    if not is_video_file(source):
         if getattr(args, "match", False):
             raise ValueError(f"{source}: --match takes a video file (a clip folder is one rally already)")
         return False
     if getattr(args, "match", False):
         return True
-    _, _, fps, n = probe_video(source)
-    if n / fps > MATCH_ABOVE_S:
-        print(f"rally3d infer: {source} is {n / fps / 60:.0f} min long: treated as a match (split into rallies); "
-              "--whole runs it as one clip", file=sys.stderr)
+    if is_long_video(source, MATCH_ABOVE_S):
+        print(f"rally3d infer: {source} is longer than {MATCH_ABOVE_S / 60:g} min: treated as a match (split into "
+              "rallies); --whole runs it as one clip", file=sys.stderr)
         return True
     return False
 

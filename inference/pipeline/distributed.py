@@ -99,15 +99,9 @@ def _p(v: str | None) -> Path | None:
 
 
 def _is_match_job(job: ItemJob, source: Path) -> bool:
-    from .match import MATCH_ABOVE_S
-    from .prepare import VIDEO_SUFFIXES, is_clip_folder, probe_video
+    from .match import is_long_video
 
-    if job.match is not None:
-        return bool(job.match)
-    if is_clip_folder(source) or source.suffix.lower() not in VIDEO_SUFFIXES:
-        return False
-    _, _, fps, n = probe_video(source)
-    return n / fps > MATCH_ABOVE_S
+    return bool(job.match) if job.match is not None else is_long_video(source)
 
 
 def config_dict(cfg) -> dict:
@@ -123,6 +117,8 @@ def run_items(jobs: list[ItemJob], cfg, *, workers: int | None = None, address: 
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:  # pragma: no cover - a dependency of the project
         raise RuntimeError("--workers/--cluster need Dask distributed: pip install 'dask[distributed]'") from None
+    from .match import duration
+
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     cfg_dict = config_dict(replace(cfg, progress=False))
     cluster = None
@@ -152,8 +148,6 @@ def run_items(jobs: list[ItemJob], cfg, *, workers: int | None = None, address: 
             r = results[k]
             rate = done / (time.perf_counter() - t0)
             left = (len(jobs) - done) / rate if rate > 0 else float("nan")
-            from .match import duration
-
             log(f"[{done}/{len(jobs)}] {r['input']}: {'ok' if r.get('ok') else 'INCOMPLETE'}"
                 f"{' on ' + r['host'] if r.get('host') else ''}; ETA {duration(left) if left == left else '?'}")
         return [r for r in results if r is not None]

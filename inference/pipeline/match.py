@@ -127,10 +127,6 @@ class Scan:
         k = max(1, int(quiet))
         return np.convolve(d, np.ones(k) / k, mode="same")
 
-    def to_dict(self) -> dict:
-        return {"fps": self.fps, "n_frames": self.n_frames, "block": self.block,
-                "diffs": [round(float(v), 3) for v in self.diffs]}
-
 
 @dataclass
 class Rally:
@@ -161,6 +157,23 @@ class Rally:
     @property
     def n_frames(self) -> int:
         return self.stop_frame - self.first_frame
+
+
+def is_video_file(path: Path) -> bool:
+    """A video file (by its suffix), not a clip folder."""
+    from .prepare import VIDEO_SUFFIXES, is_clip_folder
+
+    return not is_clip_folder(path) and Path(path).suffix.lower() in VIDEO_SUFFIXES
+
+
+def is_long_video(path: Path, above_s: float = MATCH_ABOVE_S) -> bool:
+    """A video file longer than ``above_s`` seconds: a match (``rally3d infer`` splits it into rallies)."""
+    from .prepare import probe_video
+
+    if not is_video_file(path):
+        return False
+    _, _, fps, n = probe_video(Path(path))
+    return n / fps > above_s
 
 
 def scan_video(video: Path, params: MatchParams | None = None, progress: Callable[[int, int], None] | None = None
