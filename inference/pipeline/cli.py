@@ -48,6 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pose", default="auto", help="pose backend: auto (MoveNet if installed), none, movenet, "
                    "rtmpose, rtmo")
     p.add_argument("--pose-model", type=Path, help="model file of the pose backend")
+    p.add_argument("--pose-every", type=_pose_every, default=0, metavar="N|auto",
+                   help="pose every N-th frame, the tracker fills the frames between (default auto: about 12 "
+                   "looks a second, every 2nd frame at 25-30 fps; 1: every frame)")
     p.add_argument("--method", default="joint", help="3D reconstruction method (default joint)")
     p.add_argument("--batch-size", type=int, default=1,
                    help="detector windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
@@ -89,6 +92,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _pose_every(text: str) -> int:
+    """``--pose-every``: ``auto`` (0) or a whole number ≥ 1."""
+    if text == "auto":
+        return 0
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected auto or a whole number ≥ 1, got {text!r}")
+    return value
+
+
 def _config(args: argparse.Namespace):
     from .stages import PipelineConfig
 
@@ -96,7 +112,7 @@ def _config(args: argparse.Namespace):
                           trust_checkpoint=args.trust_checkpoint, step=args.step,
                           detector_backend=args.detector_backend, detector_crop=args.detector_crop,
                           batch_size=args.batch_size, events=args.events, rally_only=args.rally_only, pose=args.pose,
-                          pose_model=args.pose_model, method=args.method, device=args.device,
+                          pose_model=args.pose_model, pose_every=args.pose_every, method=args.method, device=args.device,
                           overwrite=args.overwrite, progress=not args.no_progress,
                           auto_court=args.court_points == "auto")
 

@@ -47,6 +47,8 @@ class PipelineConfig:
             events.csv (rally.yaml lists them either way).
         pose: pose backend (``auto``: MoveNet if installed, ``none``: no players, or a backend name).
         pose_model: model file for the pose backend (None: its default).
+        pose_every: pose every N-th frame and let the tracker fill the frames between (0: ``auto``, the
+            stride that poses about :data:`~inference.players.tracking.POSE_RATE_HZ` times a second).
         method: 3D reconstruction method.
         device: ``cpu`` or ``cuda[:i]``.
         overwrite: replace files that the pipeline did not write (a backup is kept).
@@ -65,6 +67,7 @@ class PipelineConfig:
     rally_only: bool = False
     pose: str = "auto"
     pose_model: Path | None = None
+    pose_every: int = 0
     method: str = "joint"
     device: str = "cpu"
     overwrite: bool = False
@@ -74,6 +77,8 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         if self.step < 1 or self.batch_size < 1:
             raise ValueError(f"step and batch_size must be ≥ 1, got {self.step}, {self.batch_size}")
+        if self.pose_every < 0:
+            raise ValueError(f"pose_every must be ≥ 1 (or 0: auto), got {self.pose_every}")
         if self.detector_backend not in ("auto", "torch", "onnx") or self.detector_crop not in ("auto", "off"):
             raise ValueError(f"detector_backend must be auto, torch or onnx and detector_crop auto or off, got "
                              f"{self.detector_backend!r}, {self.detector_crop!r}")
@@ -418,7 +423,7 @@ def _events_inputs(ctx: Context) -> dict[str, Path | None]:
 # ------------------------------------------------------------------------------------------ players
 def _players_run(ctx: Context) -> Outcome:
     from inference.players.backends import make_backend
-    from inference.players.tracking import TrackingConfig, players_from_poses
+    from inference.players.tracking import TrackingConfig, players_from_poses, pose_stride
 
     clip = ctx.clip
     if not clip.camera_path.is_file():
@@ -434,11 +439,12 @@ def _players_run(ctx: Context) -> Outcome:
             raise Skip(f"no pose backend available ({reason})")
         raise StageError(f"pose backend {name!r}: {reason}")
     active = _court_frames(ctx)  # close-ups and replays: no pose search, no player rows
-    poses = backend.run(clip, progress=ctx.cfg.progress, active=active)
+    stride = pose_stride(clip.info.fps, ctx.cfg.pose_every)
+    poses = backend.run(clip, progress=ctx.cfg.progress, active=active, stride=stride)
     players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig(),
                                  active=active)
     clip.write_players(players)
-    note = f"{len(players.ids())} players"
+    note = f"{len(players.ids())} players" + (f" (posed every {stride} frames)" if stride > 1 else "")
     if active is not None and not active.all():
         note += f" ({int((~active).sum())} frames outside court views not searched, {_scenes_path(ctx).name})"
     return Outcome(len(poses) if active is None else int(active.sum()), note)
@@ -517,7 +523,7 @@ def build_stages() -> list[Stage]:
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model,
                                       "scenes": _scenes_path(ctx)},
-              lambda ctx: {"pose": ctx.cfg.pose}, _players_outputs, _players_run),
+              lambda ctx: {"pose": ctx.cfg.pose, "every": ctx.cfg.pose_every}, _players_outputs, _players_run),
         Stage("events", _events_inputs, lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
               requires=("smooth",)),

@@ -21,7 +21,7 @@ import numpy as np
 
 from inference.video.scenes import segments
 
-from .types import J, Persons, PoseSequence
+from .types import J, Persons, PoseSequence, sampled_frames
 
 
 class BackendUnavailable(RuntimeError):
@@ -41,8 +41,9 @@ class ImportBackend:
             return False, f"predictions file {self.path} not found; pass --predictions FILE"
         return True, ""
 
-    def run(self, clip, progress: bool = True, active: np.ndarray | None = None) -> PoseSequence:
-        """The predictions of every frame (``active`` ``(N,) bool``: only these frames, the others empty)."""
+    def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1) -> PoseSequence:
+        """The predictions of every frame (``active`` ``(N,) bool``: only these frames, the others empty;
+        ``stride`` is ignored: the file holds what the other tool looked at)."""
         from .importers import load_predictions
 
         poses = load_predictions(self.path, n_frames=clip.n_frames, fmt=self.fmt,
@@ -51,6 +52,13 @@ class ImportBackend:
             return poses
         kept = [p if i < len(active) and active[i] else Persons.empty() for i, p in enumerate(poses.frames)]
         return PoseSequence(kept, poses.source)
+
+
+def _inside(runs: list[tuple[int, int]], n: int) -> np.ndarray:
+    mask = np.zeros(n, bool)
+    for a, b in runs:
+        mask[a:b] = True
+    return mask
 
 
 def _missing_modules(*names: str) -> list[str]:
@@ -72,8 +80,9 @@ class _FrameBackend:
     def infer(self, image: np.ndarray) -> Persons:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def run(self, clip, progress: bool = True, active: np.ndarray | None = None) -> PoseSequence:
-        """Poses of every frame (``active`` ``(N,) bool``: only these frames are decoded and posed)."""
+    def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1) -> PoseSequence:
+        """Poses of every frame (``active`` ``(N,) bool``: only these frames are decoded and posed; ``stride`` N:
+        only every N-th of them, :func:`~inference.players.types.sampled_frames` — the tracker fills the rest)."""
         ok, reason = self.available()
         if not ok:
             raise BackendUnavailable(f"pose backend {self.name!r} is unavailable: {reason}")
@@ -83,13 +92,19 @@ class _FrameBackend:
             n = len(frames)
             out = [Persons.empty() for _ in range(n)]
             runs = [(0, n)] if active is None else segments(np.asarray(active, bool)[:n])
-            with tqdm(total=sum(b - a for a, b in runs), desc=f"pose {self.name}", unit="frame",
-                      disable=not progress) as bar:
+            look = np.zeros(n, bool)  # the frames posed: the stride's grid inside each run
+            for a, b in runs:
+                look[a:b] = sampled_frames(b - a, stride)
+            with tqdm(total=int(look.sum()), desc=f"pose {self.name}", unit="frame", disable=not progress) as bar:
                 for a, b in runs:
                     for i, img in enumerate(frames.iter(a, b), start=a):
-                        out[i] = self.infer(img)
-                        bar.update()
-        return PoseSequence(out, self.name)
+                        if look[i]:
+                            out[i] = self.infer(img)
+                            bar.update()
+        if stride == 1:
+            return PoseSequence(out, self.name)
+        looked = look | (sampled_frames(n, stride) & ~_inside(runs, n))  # cuts: empty looks on the same grid
+        return PoseSequence(out, self.name, looked)
 
 
 @dataclass

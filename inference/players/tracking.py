@@ -28,6 +28,18 @@ from .types import J, Persons, PoseSequence
 
 TRACKERS = ("ocsort", "bytetrack", "sort")
 
+#: How often the pose model looks at a player by default (Hz): players move ~1 m in 0.1 s at a sprint, and
+#: the event model reads wrists that the tracker fills between the looks (docs/players.md).
+POSE_RATE_HZ = 12.5
+
+
+def pose_stride(fps: float, every: int = 0) -> int:
+    """The pose stride: ``every`` when given (≥ 1), else the one that looks about :data:`POSE_RATE_HZ` a
+    second (25 fps → 2, 50 fps → 4, 12 fps → 1)."""
+    if every > 0:
+        return int(every)
+    return max(1, int(round(fps / POSE_RATE_HZ)))
+
 
 @dataclass(frozen=True)
 class TrackingConfig:
@@ -98,13 +110,19 @@ def confidence_scale(seq: PoseSequence) -> float:
 
 
 def track_people(seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingConfig) -> list[Track]:
-    """Run the tracker over the clip's poses; one :class:`Track` per tracker identity."""
+    """Run the tracker over the clip's poses (the frames the model looked at, ``seq.looked``); one
+    :class:`Track` per tracker identity, its frames numbered as the clip's."""
     import supervision as sv
 
-    tracker = _make_tracker(cfg, fps)
+    looked = np.flatnonzero(seq.looked) if seq.looked is not None else np.arange(len(seq))
+    step = max(float(np.median(np.diff(looked))) if len(looked) > 1 else 1.0, 1.0)
+    if step > 1:  # posed every N-th frame: the tracker runs at the rate of the looks, confirming a track as soon
+        cfg = replace(cfg, min_consecutive=max(1, int(round(cfg.min_consecutive / step))))  # (in time)
+    tracker = _make_tracker(cfg, fps / step)
     scale = confidence_scale(seq)
     rows: dict[int, list] = {}
-    for f, persons in enumerate(seq.frames):
+    for f in looked.tolist():
+        persons = seq.frames[f]
         keep = persons.scores >= cfg.min_person_score
         keep &= np.isfinite(persons.boxes).all(axis=1) & (persons.boxes[:, 2] > persons.boxes[:, 0])
         p = persons.select(keep)
@@ -309,7 +327,7 @@ def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: flo
 def only_frames(seq: PoseSequence, active: np.ndarray) -> PoseSequence:
     """``seq`` with nobody in the frames where ``active`` is False (or beyond its end)."""
     kept = [p if i < len(active) and active[i] else Persons.empty() for i, p in enumerate(seq.frames)]
-    return PoseSequence(kept, seq.source)
+    return PoseSequence(kept, seq.source, seq.looked)
 
 
 def take_frames(t: Track, keep: np.ndarray) -> Track:

@@ -56,8 +56,9 @@ class EveryFramePoses:
     def available(self) -> tuple[bool, str]:
         return True, ""
 
-    def run(self, clip: Clip, progress: bool = True, active: np.ndarray | None = None) -> PoseSequence:
-        frames = []
+    def run(self, clip: Clip, progress: bool = True, active: np.ndarray | None = None,
+            stride: int = 1) -> PoseSequence:
+        frames = []  # every frame, whatever the stride: the tracker then runs at the clip's rate
         for f in range(clip.n_frames):
             m = self.truth.frame == f
             kp = self.truth.keypoints[m]
