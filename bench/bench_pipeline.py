@@ -4,7 +4,7 @@ Runs the whole pipeline (camera, detect, smooth, events, players with MoveNet, r
 output folder, prints the per-stage table with the slowest stage named, and the scores against the sample's
 ground truth. With ``--device cuda`` it measures the GPU (where one is lent).
 
-    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1] [--detector-backend auto|torch|onnx]
+    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1] [--detector-backend auto|torch|onnx] [--pose-every N]
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ def main() -> int:
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--pose", default="movenet")
     ap.add_argument("--batch-size", type=int, default=1)
+    ap.add_argument("--pose-every", type=int, default=0, help="pose every N-th frame (0: auto, as rally3d infer)")
     ap.add_argument("--detector-backend", default="auto", choices=["auto", "torch", "onnx"])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_pipeline")
     args = ap.parse_args()
@@ -35,7 +36,7 @@ def main() -> int:
         shutil.rmtree(args.out)
     prepared = prepare(SAMPLE, args.out, None)
     cfg = PipelineConfig(pose=args.pose, device=args.device, batch_size=args.batch_size, progress=False,
-                         detector_backend=args.detector_backend)
+                         detector_backend=args.detector_backend, pose_every=args.pose_every)
     report = run_pipeline(prepared.clip, cfg, log=lambda *_: None)
     import torch
 
@@ -44,7 +45,10 @@ def main() -> int:
           f"torch {torch.__version__}, {platform.processor() or platform.machine()}")
     print(report.table())
     total = sum(s.seconds for s in report.stages)
-    print(f"end to end: {prepared.clip.n_frames / total:.2f} frames/s")
+    cpu = sum(s.cpu_seconds for s in report.stages)
+    video_s = prepared.clip.n_frames / prepared.clip.info.fps
+    print(f"end to end: {prepared.clip.n_frames / total:.2f} frames/s; {cpu / video_s:.2f} CPU-s per second of video, "
+          f"{total / video_s:.2f} wall s per second of video")
     for line in score(prepared.clip, Clip(SAMPLE)).lines():
         print("  " + line)
     return 0 if report.ok else 1

@@ -4,7 +4,7 @@
 
 Held-out rendered rallies (padel seeds 300+, tennis 400+, generated once under ``--data``) go through MoveNet
 once on every frame, each frame's inference CPU time kept; a stride N keeps the poses of
-:func:`~inference.players.types.sampled_frames` only — the poses MoveNet would give there, since it looks at one
+:func:`~inference.players.sampling.sampled_frames` only — the poses MoveNet would give there, since it looks at one
 frame at a time — and runs the player pipeline (tracking at the looks' rate, gaps filled) on them. Printed per
 sport and stride, against ``gt/players.csv``: court-position error, identity switches, coverage of the true
 player-frames, the wrists' error in pixels on the frames where the pose model did not look, the shipped
@@ -22,7 +22,8 @@ import numpy as np
 from inference.clipio import Clip, Manifest
 from inference.court import load_court
 from inference.players.tracking import TrackingConfig, players_from_poses
-from inference.players.types import Persons, PoseSequence, sampled_frames
+from inference.players.sampling import sampled_frames
+from inference.players.types import Persons, PoseSequence
 
 SEEDS = {"padel": 300, "tennis": 400}
 WRISTS = (9, 10)

@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "rtmpose, rtmo")
     p.add_argument("--pose-model", type=Path, help="model file of the pose backend")
     p.add_argument("--pose-every", type=_pose_every, default=0, metavar="N|auto",
-                   help="pose every N-th frame, the tracker fills the frames between (default auto: about 12 "
+                   help="pose every N-th frame, the tracker fills the frames between (default auto: about 15 "
                    "looks a second, every 2nd frame at 25-30 fps; 1: every frame)")
     p.add_argument("--method", default="joint", help="3D reconstruction method (default joint)")
     p.add_argument("--batch-size", type=int, default=1,

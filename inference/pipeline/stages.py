@@ -444,7 +444,9 @@ def _players_run(ctx: Context) -> Outcome:
     players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig(),
                                  active=active)
     clip.write_players(players)
-    note = f"{len(players.ids())} players" + (f" (posed every {stride} frames)" if stride > 1 else "")
+    note = f"{len(players.ids())} players"
+    if stride > 1:
+        note += f" (posed every {stride} frames)"
     if active is not None and not active.all():
         note += f" ({int((~active).sum())} frames outside court views not searched, {_scenes_path(ctx).name})"
     return Outcome(len(poses) if active is None else int(active.sum()), note)

@@ -21,7 +21,8 @@ import numpy as np
 
 from inference.video.scenes import segments
 
-from .types import J, Persons, PoseSequence, sampled_frames
+from .sampling import sampled_frames
+from .types import J, Persons, PoseSequence
 
 
 class BackendUnavailable(RuntimeError):
@@ -81,8 +82,13 @@ class _FrameBackend:
         raise NotImplementedError
 
     def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1) -> PoseSequence:
-        """Poses of every frame (``active`` ``(N,) bool``: only these frames are decoded and posed; ``stride`` N:
-        only every N-th of them, :func:`~inference.players.types.sampled_frames` — the tracker fills the rest)."""
+        """Poses of the clip's frames.
+
+        Args:
+            active: (N,) bool, only these frames are decoded and posed (None: all).
+            stride: pose every ``stride``-th of them (:func:`~inference.players.sampling.sampled_frames`), the
+                tracker fills the rest; 1: every frame.
+        """
         ok, reason = self.available()
         if not ok:
             raise BackendUnavailable(f"pose backend {self.name!r} is unavailable: {reason}")

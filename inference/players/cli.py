@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tracker", choices=TRACKERS, default="ocsort")
     p.add_argument("--pose-every", type=int, default=0, metavar="N",
                    help="movenet/rtmpose/rtmo: pose every N-th frame, the tracker fills the frames between "
-                   "(default 0: about 12 looks a second, as rally3d infer; 1: every frame)")
+                   "(default 0: about 15 looks a second, as rally3d infer; 1: every frame)")
     p.add_argument("--gt-camera", action="store_true", help="use gt/camera.yaml instead of camera.yaml")
     p.add_argument("--out", type=Path, help="write here instead of the clip's players.csv (an existing file is "
                    "backed up in .rally3d/backup/ beside it, as the clip's players.csv is)")

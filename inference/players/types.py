@@ -76,9 +76,9 @@ class PoseSequence:
     model did not look at it).
 
     Attributes:
-        looked: (N,) bool, the frames the model looked at (posing every N-th frame, :func:`sampled_frames`;
-            outside the court views, empty frames on the same grid), None: every frame. The tracker runs on
-            these frames only and fills the others.
+        looked: (N,) bool, the frames the model looked at on its grid (posing every N-th frame,
+            :func:`~inference.players.sampling.sampled_frames`; outside the court views, empty frames on the same
+            grid), None: every frame. The tracker runs on these frames and fills the others.
     """
 
     frames: list[Persons]
@@ -89,15 +89,3 @@ class PoseSequence:
         return len(self.frames)
 
 
-
-def sampled_frames(n: int, stride: int = 1) -> np.ndarray:
-    """(n,) bool: the frames of a run of ``n`` that a pose model looks at when it runs on every ``stride``-th
-    frame — ``0, stride, 2·stride, …`` and the last (so the frames between two looks can be filled up to the
-    run's end). ``stride`` 1: every frame."""
-    if stride < 1:
-        raise ValueError(f"pose stride must be ≥ 1, got {stride}")
-    mask = np.zeros(n, bool)
-    mask[::stride] = True
-    if n:
-        mask[n - 1] = True
-    return mask

@@ -12,7 +12,7 @@ from inference.players import Persons, PoseSequence
 from inference.players.backends import _FrameBackend
 from inference.players.evaluate import DetectionNoise, score, simulate_detections
 from inference.players.tracking import players_from_poses, pose_stride
-from inference.players.types import sampled_frames
+from inference.players.sampling import sampled_frames
 
 SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
 
@@ -31,7 +31,7 @@ def test_sampled_frames_keep_the_grid_and_the_last_frame():
 
 
 def test_pose_stride_from_the_frame_rate():
-    assert [pose_stride(f) for f in (12, 25, 30, 50, 60)] == [1, 2, 2, 4, 5]
+    assert [pose_stride(f) for f in (12, 25, 30, 50, 60)] == [1, 2, 2, 3, 4]
     assert pose_stride(25, every=1) == 1 and pose_stride(25, every=3) == 3
 
 
@@ -98,3 +98,4 @@ def test_an_ungridded_sequence_without_looks_is_tracked_on_every_frame(padel):
     b = players_from_poses(PoseSequence(seq.frames, seq.source, np.ones(len(seq), bool)), cam, court,
                            padel.info.fps)
     assert np.array_equal(a.frame, b.frame) and np.allclose(a.court_xy, b.court_xy, equal_nan=True)
+
