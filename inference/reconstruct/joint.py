@@ -465,9 +465,23 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
 def _bad_flights(fit: ChainFit) -> list[int]:
     """Flights between two contacts that fail their checks, the worst fitted first (a flight that is far off
     bends its neighbours: their hypotheses wait until it is explained)."""
-    bad = [k for k, c in enumerate(fit.checks) if not c.ok and fit.problem.chain.flights[k].end is not None]
+    flights = fit.problem.chain.flights
+    bad = [k for k, c in enumerate(fit.checks) if not c.ok and flights[k].end is not None]
     rms = [fit.checks[k].rms_px for k in bad]
-    return [k for _, k in sorted(zip([-(r if r == r else 0.0) for r in rms], bad))]
+    out = [k for _, k in sorted(zip([-(r if r == r else 0.0) for r in rms], bad))]
+    # a failing run-out or lead-in is muted, not refitted; what breaks it is often its contact, whose
+    # hypotheses belong to the flight on its other side (a bounce just before the last hit, missed)
+    for k, c in enumerate(fit.checks):
+        if not c.ok and flights[k].end is None:
+            for j in (k - 1, k + 1):
+                if 0 <= j < len(flights) and flights[j].end is not None and fit.checks[j].ok and j not in out:
+                    out.append(j)
+    return out
+
+
+def _n_failing(fit: ChainFit) -> int:
+    """How many of the chain's flights (lead-in and run-out included) fail their checks."""
+    return sum(not c.ok for c in fit.checks)
 
 
 #: refit hypotheses that leave this many 2D points (or a tenth of the rally's) unexplained more or less than
@@ -516,7 +530,10 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
                 if isinstance(cand, str):
                     continue
                 n, cost = unexplained(cand, span)
-                if n < current[0] - tol or (n <= current[0] + tol and cost < 0.5 * current[1]):
+                # as much explained, and fitted better: by half, or at all when fewer flights fail (the run-out
+                # and lead-in included: a hit at the floor fails the run-out, not the flight before it)
+                better = cost < 0.5 * current[1] or (cost < current[1] and _n_failing(cand) < _n_failing(fit))
+                if n < current[0] - tol or (n <= current[0] + tol and better):
                     kept.append((n, cost, cand))
             if kept:  # of those explaining about as much of the track as the best, the one that fits it best
                 least = min(n for n, _, _ in kept)

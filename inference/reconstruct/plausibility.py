@@ -408,10 +408,14 @@ def _side_label(fit: ChainFit, frame: int) -> str:
     return "player_near" if not np.isfinite(y) or y < pb.obs.court.net_y else "player_far"
 
 
+#: A racket hit fitted lower than this (m) is at the floor: hypothesis 1b looks for the bounce just before it.
+FLOOR_HIT_M = 0.15
+
+
 def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
     """Plans to try for flight ``k`` of a fitted chain that fails its checks (yielded lazily, most likely
-    first): a missed bounce inside it (at the track's sharpest turn, then in its gaps: a bounce the tracker
-    lost or one outside the picture), a missed racket hit (a volley, a hit hidden by the player), another
+    first): a missed bounce inside it (at the track's sharpest turn, just before a racket hit fitted at the
+    floor, then in its gaps: a bounce the tracker lost or one outside the picture), a missed racket hit (a volley, a hit hidden by the player), another
     surface or event class at its contacts, no contact at all."""
     pb = fit.problem
     ch = pb.chain
@@ -434,15 +438,28 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
         return plan_with(contacts[:pos] + [PlanContact(prior, None, note)] + contacts[pos:], (frame, note))
 
     ends = [f.start] + ([f.end] if f.end is not None else [])
-    # 1. a missed bounce inside the flight at a sharp turn of the track
     label = _bounce_label(obs.court)
+    floor_hit_bounces: list[int] = []
+    # 1. a bounce just before a racket hit that the fit puts at the floor: the ball played off the bounce
+    #     (a half-volley, a volley after a low bounce), the two contacts merged into one event
+    if f.end is not None and contacts[f.end].prior.label in PLAYER_EVENTS and \
+            float(ch.point(fit.sol.theta, f.end)[2]) < FLOOR_HIT_M:
+        hit = contacts[f.end].prior.frame
+        for frame in (hit - 2, hit - 3):
+            if frame > chk.first + 1 and contact_prior(obs, frame, label).ok:
+                floor_hit_bounces.append(frame)
+                plan = inserted(frame, label, "a surface")
+                if plan is not None:
+                    yield plan
+    # 1b. a missed bounce inside the flight at a sharp turn of the track
     kinks = [fr for fr in _kink_frames(obs, chk.first, chk.last, pb.frames, pb.last_norm)
              if contact_prior(obs, fr, label).ok]
     gaps = [fr for fr in _gap_frames(obs, chk.first, chk.last) if fr not in kinks]
     for frame in kinks:
-        plan = inserted(frame, label, "a surface")
-        if plan is not None:
-            yield plan
+        if frame not in floor_hit_bounces:
+            plan = inserted(frame, label, "a surface")
+            if plan is not None:
+                yield plan
     # 2. another surface or event class at its contacts
     for c in ends:
         pc = contacts[c]
