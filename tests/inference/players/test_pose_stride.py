@@ -99,3 +99,16 @@ def test_an_ungridded_sequence_without_looks_is_tracked_on_every_frame(padel):
                            padel.info.fps)
     assert np.array_equal(a.frame, b.frame) and np.allclose(a.court_xy, b.court_xy, equal_nan=True)
 
+
+
+def test_pose_every_is_checked_where_it_is_given(capsys):
+    from inference.cli import main
+    from inference.pipeline.cli import _pose_every
+    from inference.pipeline.stages import PipelineConfig
+
+    assert _pose_every("auto") == 0 and _pose_every("3") == 3
+    with pytest.raises(ValueError, match="pose_every"):
+        PipelineConfig(pose_every=-1)
+    with pytest.raises(SystemExit):
+        main(["infer", "nothing.mp4", "--pose-every", "0"])
+    assert "expected auto or a whole number" in capsys.readouterr().err
