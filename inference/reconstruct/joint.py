@@ -469,13 +469,13 @@ def _bad_flights(fit: ChainFit) -> list[int]:
     bad = [k for k, c in enumerate(fit.checks) if not c.ok and flights[k].end is not None]
     rms = [fit.checks[k].rms_px for k in bad]
     out = [k for _, k in sorted(zip([-(r if r == r else 0.0) for r in rms], bad))]
-    # a failing run-out or lead-in is muted, not refitted; what breaks it is often its contact, whose
-    # hypotheses belong to the flight on its other side (a bounce just before the last hit, missed)
+    # a failing run-out is muted, not refitted; what breaks it is often its contact, whose hypotheses belong
+    # to the flight before it (a bounce just before the last hit, missed)
     for k, c in enumerate(fit.checks):
         if not c.ok and flights[k].end is None:
-            for j in (k - 1, k + 1):
-                if 0 <= j < len(flights) and flights[j].end is not None and fit.checks[j].ok and j not in out:
-                    out.append(j)
+            j = k - 1
+            if j >= 0 and flights[j].end is not None and fit.checks[j].ok and j not in out:
+                out.append(j)
     return out
 
 
@@ -531,7 +531,7 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
                     continue
                 n, cost = unexplained(cand, span)
                 # as much explained, and fitted better: by half, or at all when fewer flights fail (the run-out
-                # and lead-in included: a hit at the floor fails the run-out, not the flight before it)
+                # included: a hit at the floor fails the run-out, not the flight before it)
                 better = cost < 0.5 * current[1] or (cost < current[1] and _n_failing(cand) < _n_failing(fit))
                 if n < current[0] - tol or (n <= current[0] + tol and better):
                     kept.append((n, cost, cand))

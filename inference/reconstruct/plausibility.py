@@ -417,7 +417,7 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
     first): a missed bounce inside it (at the track's sharpest turn, just before a racket hit fitted at the
     floor, then in its gaps: a bounce the tracker lost or one outside the picture), a missed racket hit (a volley, a hit hidden by the player), another
     surface or event class at its contacts, no contact at all. For a flight that passes its own checks (the
-    neighbour of a failing run-out or lead-in) only the bounce before its end hit."""
+    neighbour of a failing run-out) only the bounce before its end hit."""
     pb = fit.problem
     ch = pb.chain
     f = ch.flights[k]
@@ -452,7 +452,7 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
                 plan = inserted(frame, label, "a surface")
                 if plan is not None:
                     yield plan
-    if chk.ok:  # a passing flight beside a failing run-out or lead-in: only its shared contact is in question
+    if chk.ok:  # a passing flight before a failing run-out: only its end contact is in question
         return
     # 1b. a missed bounce inside the flight at a sharp turn of the track
     kinks = [fr for fr in _kink_frames(obs, chk.first, chk.last, pb.frames, pb.last_norm)

@@ -219,13 +219,13 @@ def test_a_run_out_is_not_rebuilt_from_three_frames_at_the_contact():
 
 def test_a_failing_run_out_puts_the_flight_before_it_up_for_refits():
     """A racket hit fitted at the floor fails the run-out after it, not the flight before it: the run-out is
-    muted (never refitted), so the flight on the other side of its contact gets the hypotheses, after the
-    failing flights between two contacts (worst first)."""
+    muted (never refitted), so the flight before its contact gets the hypotheses, after the failing flights
+    between two contacts (worst first)."""
     from types import SimpleNamespace as NS
 
     from inference.reconstruct.joint import _bad_flights
 
-    flights = [NS(end=None), NS(end=1), NS(end=2), NS(end=3), NS(end=None)]   # lead-in, 3 flights, run-out
+    flights = [NS(end=0), NS(end=1), NS(end=2), NS(end=3), NS(end=None)]   # lead-in, 3 flights, run-out
     checks = [NS(ok=True, rms_px=1.0), NS(ok=False, rms_px=9.0), NS(ok=True, rms_px=2.0),
               NS(ok=True, rms_px=2.0), NS(ok=False, rms_px=30.0)]
     fit = NS(checks=checks, problem=NS(chain=NS(flights=flights)))
