@@ -48,7 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pose", default="auto", help="pose backend: auto (MoveNet if installed), none, movenet, "
                    "rtmpose, rtmo")
     p.add_argument("--pose-model", type=Path, help="model file of the pose backend")
-    p.add_argument("--pose-every", type=_pose_every, default=0, metavar="N|auto",
+    from inference.players.sampling import parse_pose_every
+
+    p.add_argument("--pose-every", type=parse_pose_every, default=0, metavar="N|auto",
                    help="pose every N-th frame, the tracker fills the frames between (default auto: about 15 "
                    "looks a second, every 2nd frame at 25-30 fps; 1: every frame)")
     p.add_argument("--method", default="joint", help="3D reconstruction method (default joint)")
@@ -90,19 +92,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=1, help="--workers/--cluster: torch threads per worker (default 1)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
-
-
-def _pose_every(text: str) -> int:
-    """``--pose-every``: ``auto`` (0) or a whole number ≥ 1."""
-    if text == "auto":
-        return 0
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected auto or a whole number ≥ 1, got {text!r}")
-    return value
 
 
 def _config(args: argparse.Namespace):

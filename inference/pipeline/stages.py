@@ -48,7 +48,7 @@ class PipelineConfig:
         pose: pose backend (``auto``: MoveNet if installed, ``none``: no players, or a backend name).
         pose_model: model file for the pose backend (None: its default).
         pose_every: pose every N-th frame and let the tracker fill the frames between (0: ``auto``, the
-            stride that poses about :data:`~inference.players.tracking.POSE_RATE_HZ` times a second).
+            stride that poses about :data:`~inference.players.sampling.POSE_RATE_HZ` times a second).
         method: 3D reconstruction method.
         device: ``cpu`` or ``cuda[:i]``.
         overwrite: replace files that the pipeline did not write (a backup is kept).
@@ -423,7 +423,8 @@ def _events_inputs(ctx: Context) -> dict[str, Path | None]:
 # ------------------------------------------------------------------------------------------ players
 def _players_run(ctx: Context) -> Outcome:
     from inference.players.backends import make_backend
-    from inference.players.tracking import TrackingConfig, players_from_poses, pose_stride
+    from inference.players.sampling import pose_stride
+    from inference.players.tracking import TrackingConfig, players_from_poses
 
     clip = ctx.clip
     if not clip.camera_path.is_file():

@@ -55,13 +55,6 @@ class ImportBackend:
         return PoseSequence(kept, poses.source)
 
 
-def _inside(runs: list[tuple[int, int]], n: int) -> np.ndarray:
-    mask = np.zeros(n, bool)
-    for a, b in runs:
-        mask[a:b] = True
-    return mask
-
-
 def _missing_modules(*names: str) -> list[str]:
     return [n for n in names if importlib.util.find_spec(n) is None]
 
@@ -97,7 +90,12 @@ class _FrameBackend:
         with clip.frames() as frames:
             n = len(frames)
             out = [Persons.empty() for _ in range(n)]
-            runs = [(0, n)] if active is None else segments(np.asarray(active, bool)[:n])
+            inside = np.ones(n, bool)  # the court-view frames (beyond ``active``'s end: none)
+            if active is not None:
+                given = np.asarray(active, bool)[:n]
+                inside[:] = False
+                inside[: len(given)] = given
+            runs = segments(inside)
             look = np.zeros(n, bool)  # the frames posed: the stride's grid inside each run
             for a, b in runs:
                 look[a:b] = sampled_frames(b - a, stride)
@@ -109,7 +107,7 @@ class _FrameBackend:
                             bar.update()
         if stride == 1:
             return PoseSequence(out, self.name)
-        looked = look | (sampled_frames(n, stride) & ~_inside(runs, n))  # cuts: empty looks on the same grid
+        looked = look | (sampled_frames(n, stride) & ~inside)  # cuts: empty looks on the same grid
         return PoseSequence(out, self.name, looked)
 
 

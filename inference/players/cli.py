@@ -25,9 +25,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--det-model", type=Path, help="rtmpose: the person detector (YOLOX) ONNX file")
     p.add_argument("--model", type=Path, help="movenet: the MultiPose Lightning .tflite file")
     p.add_argument("--tracker", choices=TRACKERS, default="ocsort")
-    p.add_argument("--pose-every", type=int, default=0, metavar="N",
+    from .sampling import parse_pose_every
+
+    p.add_argument("--pose-every", type=parse_pose_every, default=0, metavar="N|auto",
                    help="movenet/rtmpose/rtmo: pose every N-th frame, the tracker fills the frames between "
-                   "(default 0: about 15 looks a second, as rally3d infer; 1: every frame)")
+                   "(default auto: about 15 looks a second, as rally3d infer; 1: every frame)")
     p.add_argument("--gt-camera", action="store_true", help="use gt/camera.yaml instead of camera.yaml")
     p.add_argument("--out", type=Path, help="write here instead of the clip's players.csv (an existing file is "
                    "backed up in .rally3d/backup/ beside it, as the clip's players.csv is)")
@@ -46,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from inference.court import load_court
 
     from .backends import BackendUnavailable, make_backend
-    from .tracking import TrackingConfig, players_from_poses, pose_stride
+    from .sampling import pose_stride
+    from .tracking import TrackingConfig, players_from_poses
 
     clip = Clip(args.clip)
     camera = clip.read_camera(gt=args.gt_camera)
@@ -60,8 +63,6 @@ def run(args: argparse.Namespace) -> int:
     target = args.out or clip.players_path
     old = read_players_csv(target) if span.active and target.is_file() else None  # a bad file fails now
     active = span.mask(clip.info.fps, clip.n_frames) if span.active else None
-    if args.pose_every < 0:
-        raise ValueError(f"--pose-every must be ≥ 1 (or 0: auto), got {args.pose_every}")
     poses = backend.run(clip, active=active, stride=pose_stride(clip.info.fps, args.pose_every))
     players = players_from_poses(poses, camera, court, clip.info.fps, TrackingConfig(tracker=args.tracker))
     if span.active:

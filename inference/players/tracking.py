@@ -28,21 +28,6 @@ from .types import J, Persons, PoseSequence
 
 TRACKERS = ("ocsort", "bytetrack", "sort")
 
-#: How often the pose model looks at the players by default (Hz). On held-out rendered rallies posing every
-#: 2nd frame at 25 fps (12.5 Hz) or every 3rd at 50 fps kept the court error, identities and event F1 of posing
-#: every frame for half or a third of the pose CPU; at 6–12 Hz the players' coverage starts to fall
-#: (docs/players.md, ``bench/bench_pose_stride.py``).
-POSE_RATE_HZ = 15.0
-
-
-def pose_stride(fps: float, every: int = 0) -> int:
-    """The pose stride: ``every`` when given (≥ 1), else the one that looks about :data:`POSE_RATE_HZ` times a
-    second (25 and 30 fps → 2, 50 fps → 3, 60 fps → 4, 12 fps → 1)."""
-    if every > 0:
-        return int(every)
-    return max(1, int(round(fps / POSE_RATE_HZ)))
-
-
 @dataclass(frozen=True)
 class TrackingConfig:
     """Knobs of the player pipeline."""

@@ -11,7 +11,8 @@ from inference.court import load_court
 from inference.players import Persons, PoseSequence
 from inference.players.backends import _FrameBackend
 from inference.players.evaluate import DetectionNoise, score, simulate_detections
-from inference.players.tracking import players_from_poses, pose_stride
+from inference.players.sampling import pose_stride
+from inference.players.tracking import players_from_poses
 from inference.players.sampling import sampled_frames
 
 SAMPLE = Path(__file__).resolve().parents[3] / "datasets" / "sample"
@@ -103,10 +104,10 @@ def test_an_ungridded_sequence_without_looks_is_tracked_on_every_frame(padel):
 
 def test_pose_every_is_checked_where_it_is_given(capsys):
     from inference.cli import main
-    from inference.pipeline.cli import _pose_every
+    from inference.players.sampling import parse_pose_every
     from inference.pipeline.stages import PipelineConfig
 
-    assert _pose_every("auto") == 0 and _pose_every("3") == 3
+    assert parse_pose_every("auto") == 0 and parse_pose_every("3") == 3
     with pytest.raises(ValueError, match="pose_every"):
         PipelineConfig(pose_every=-1)
     with pytest.raises(SystemExit):
