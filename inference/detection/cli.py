@@ -89,4 +89,6 @@ def _windows(counts: dict[str, int]) -> str:
     text = f"{counts.get('full', 0)} full"
     if counts.get("crop"):
         text += f", {counts['crop']} crop ({counts.get('crop_rerun', 0)} re-run on the full frame)"
+    if counts.get("lost_skipped"):
+        text += f", {counts['lost_skipped']} skipped while the ball was lost"
     return text

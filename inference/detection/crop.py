@@ -16,6 +16,11 @@ Rules (:class:`CropConfig`), per detector window of ``F`` frames:
   ``min_score`` or more at least ``border`` pixels inside the crop (near its edges the network sees zero
   padding instead of the scene). Otherwise the same window is **re-run on the full frame** at once — a hit
   or bounce that threw the ball out of the crop costs one extra full pass, never a lost frame.
+- **Lost ball backoff**: while the tracker has no ball and ``lost_after`` full-frame windows in a row found
+  none (the ball above the picture on a lob, between points), only every ``lost_skip + 1``-th window is
+  searched; when one finds the ball again, the skipped windows before it are searched at once and their
+  frames reach the tracker in order, so the track is the same unless a ball shows only inside a skipped
+  window (under ``lost_skip × F`` frames).
 
 Example:
     >>> cfg = CropConfig()
@@ -43,6 +48,9 @@ class CropConfig:
     min_score: float = 1.0               # Σ heatmap of a blob that counts as "the ball was found"
     full_every_s: float = 1.0            # a full-frame window at least this often
     align: int = 8                       # crops start on this grid (the networks' total stride)
+    lost_after: int = 2                  # while the tracker has no ball: after this many full windows without
+    lost_skip: int = 1                   # one, skip this many windows between searches (0: never); a search
+                                         # that finds the ball again searches the skipped windows too
 
     def __post_init__(self) -> None:
         h, w = self.size

@@ -37,6 +37,7 @@ from .tracker import BallTracker, TrackerConfig, TrackResult, track_candidates
 
 log = logging.getLogger(__name__)
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
+STILL_PX = 6.0  # px: a candidate this close to one of the window searched before has not moved (lost-ball backoff)
 SHIPPED = {"wasb": WEIGHTS_DIR / "wasb_padel.pth.tar"}
 #: the sport each shipped checkpoint was trained on
 SHIPPED_SPORT = {"wasb": "padel"}
@@ -64,7 +65,8 @@ class DetectionResult:
     """Per-frame candidates, the tracked ball and timing of one clip.
 
     ``windows``: how many detector windows ran on the full frame (``full``), on a crop (``crop``), and
-    crops whose answer was not trusted and were re-run on the full frame (``crop_rerun``).
+    crops whose answer was not trusted and were re-run on the full frame (``crop_rerun``), and windows not
+    searched while the ball was lost (``lost_skipped``, see :mod:`.crop`).
     """
 
     candidates: list[FrameCandidates]
@@ -236,6 +238,28 @@ class BallDetectorRunner:
             return found
 
         batch: list[tuple[int, list[np.ndarray], int]] = []
+        skipped: list[tuple[int, list[np.ndarray], int]] = []  # windows not searched while the ball is lost
+        misses = 0  # full-frame windows in a row that found no ball while the tracker had none
+
+        still = np.empty((0, 2))  # the candidates of the last window searched: a blob that stays is no ball
+
+        def full(start: int, window: list[np.ndarray], first_new: int) -> bool:
+            """Run one window on the full frame; whether it holds a new candidate (one scoring ``min_score`` or
+            more away from every candidate of the window searched before: a ball lying still is not one)."""
+            nonlocal seconds, last_full, still
+            probs, dt = self._forward([window])
+            seconds += dt
+            counts["full"] += 1
+            last_full = start
+            add([(start, first_new)], probs)
+            cs = [c for f in range(start, start + self.frames_in) for c in pending.get(f, [])]
+            xy = np.concatenate([np.asarray(c.xy, float).reshape(-1, 2)[np.asarray(c.score) >= self.crop.min_score]
+                                 for c in cs]) if cs else np.empty((0, 2))
+            new = xy if not len(still) else xy[np.min(np.linalg.norm(xy[:, None] - still[None], axis=2), axis=1)
+                                               > STILL_PX] if len(xy) else xy
+            still = xy
+            return bool(len(new))
+
         for start, window, first_new in self._windows(frames):
             if online is None:   # full frames, batched
                 batch.append((start, window, first_new))
@@ -247,7 +271,7 @@ class BallDetectorRunner:
                     finish(batch[-1][0] + self.step)
                     batch.clear()
                 continue
-            finish(start)
+            finish(skipped[0][0] if skipped else start)
             origin = None
             if start - last_full < full_every:
                 origin = self._place_crop(online, lb, start)
@@ -260,18 +284,28 @@ class BallDetectorRunner:
                     finish(start + self.step)
                     continue
                 counts["crop_rerun"] += 1
-            probs, dt = self._forward([window])
-            seconds += dt
-            counts["full"] += 1
-            last_full = start
-            add([(start, first_new)], probs)
+            lost = online.expected(np.arange(1, 2)) is None
+            if lost and misses >= self.crop.lost_after and len(skipped) < self.crop.lost_skip:
+                skipped.append((start, window, first_new))   # decided by the next searched window
+                counts["lost_skipped"] = counts.get("lost_skipped", 0) + 1
+                continue
+            found = full(start, window, first_new)
+            if found and skipped:   # the ball is back: search the windows skipped before it (same result)
+                for args in skipped:
+                    full(*args)
+                    counts["lost_skipped"] -= 1
+            skipped.clear()
+            misses = 0 if found or not lost else misses + 1
             finish(start + self.step)
         if batch:
             probs, dt = self._forward([w for _, w, _ in batch])
             seconds += dt
             add([(s, n) for s, _, n in batch], probs)
             counts["full"] += len(batch)
-        finish(max(pending, default=-1) + 1)
+        if not counts.get("lost_skipped", 1):
+            del counts["lost_skipped"]   # every skipped window was searched after all
+        ends = [max(pending, default=-1) + 1] + [s + self.frames_in for s, _, _ in skipped]
+        finish(max(ends))   # windows still skipped at the end: the ball never came back, their frames are empty
         return done, seconds, counts
 
     def _place_crop(self, online: BallTracker, lb: Letterbox, start: int) -> tuple[int, int] | None:

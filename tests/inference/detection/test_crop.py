@@ -89,6 +89,36 @@ def test_the_ball_is_reacquired_after_a_long_gap(tmp_path):
     assert set(positions(full_only)) == set(found)
 
 
+@pytest.mark.parametrize("back_at", [84, 85, 86])
+def test_a_lost_ball_is_searched_every_other_window_and_the_skipped_ones_are_searched_when_it_is_back(
+        tmp_path, back_at):
+    """While the ball is gone (a lob above the picture) only every other window runs; the window that finds it
+    again runs the skipped one before it too, so the track is the one of searching every window, wherever in
+    a window the ball comes back."""
+    xy = rally(120)
+    xy[40:back_at] = np.nan
+    xy[back_at:] = np.stack([500 - 6.0 * np.arange(120 - back_at), 80 + 3.0 * np.arange(120 - back_at)], axis=1)
+    clip = render_clip(tmp_path / "lost", xy, (W, H))
+    every = runner(CropConfig(lost_skip=0)).run(clip)
+    backoff = runner(CropConfig()).run(clip)
+    assert "lost_skipped" not in every.windows
+    assert backoff.windows["lost_skipped"] >= 5, backoff.windows            # ~13 windows without a ball
+    assert backoff.windows["full"] <= every.windows["full"] - 5, (backoff.windows, every.windows)
+    a, b = positions(every), positions(backoff)
+    assert min(f for f in a if f >= 40) <= back_at + 1                     # found where it came back
+    assert set(a) == set(b) and max(np.linalg.norm(a[f] - b[f]) for f in a) < 1.0
+    assert len(backoff.track) == len(every.track) == 120
+
+
+def test_a_ball_that_never_comes_back_leaves_the_skipped_frames_empty(tmp_path):
+    xy = rally(60)
+    xy[20:] = np.nan
+    clip = render_clip(tmp_path / "gone", xy, (W, H))
+    result = runner(CropConfig()).run(clip)
+    assert result.windows["lost_skipped"] >= 3 and len(result.candidates) == 60
+    assert not any(f >= 22 for f in positions(result))
+
+
 def test_place_crop_keeps_the_expected_ball_inside_on_the_stride_grid():
     cfg = CropConfig(size=(144, 256), margin=32)
     y0, x0 = place_crop(np.array([[300.0, 100.0], [310.0, 104.0]]), (288, 512), cfg)
