@@ -9,7 +9,9 @@ frame at a time — and runs the player pipeline (tracking at the looks' rate, g
 sport and stride, against ``gt/players.csv``: court-position error, identity switches, coverage of the true
 player-frames, the wrists' error in pixels on the frames where the pose model did not look, the shipped
 player-aware event model's F1 (ball: ``gt/ball.csv``, ±2 frames at 50 fps) with those players and without any,
-and the pose CPU seconds per second of video (the kept frames' measured inference time).
+and the pose CPU seconds per second of video (the kept frames' measured inference time). ``--crops`` adds rows
+"N + tiles": the default clip loop (:class:`~inference.players.crops.CropLooks`: most looks pose only tiles
+around the people of the look before) run for real at that stride, its looks' CPU time measured.
 """
 from __future__ import annotations
 
@@ -70,6 +72,18 @@ def keep_stride(seq: PoseSequence, stride: int) -> PoseSequence:
     return PoseSequence(kept, seq.source, None if stride == 1 else look)
 
 
+def pose_with_tiles(clip: Clip, stride: int) -> tuple[PoseSequence, float, dict]:
+    """The default clip loop with tile looks at ``stride``: the poses, the looks' CPU seconds and their kinds."""
+    from inference.players.backends import MoveNetBackend
+    from inference.players.crops import CropLooks
+
+    backend = MoveNetBackend(crops=CropLooks())
+    backend.infer(np.zeros((64, 64, 3), np.uint8))  # load the model outside the measurement
+    backend.looks = {"full": 0, "tiles": 0}
+    seq = backend.run(clip, progress=False, stride=stride)
+    return seq, backend.look_cpu_s, dict(backend.looks)
+
+
 def wrist_error_px(pred, gt, look: np.ndarray, wh: np.ndarray) -> float:
     """Median wrist error (px) of matched players on the frames the pose model did not look at (stride 1: all)."""
     from inference.players.evaluate import match_frames
@@ -109,6 +123,8 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=300, help="frames per generated clip at most")
     ap.add_argument("--sports", default="padel,tennis")
     ap.add_argument("--data", type=Path, default=Path("runs/bench_pose_stride"))
+    ap.add_argument("--crops", default="", help="comma-separated strides that also get a row with tile looks "
+                    "(the default clip loop, run for real)")
     args = ap.parse_args()
     from inference.clipio import EVENT_LABELS
     from inference.events import EventDetector
@@ -132,12 +148,21 @@ def main() -> int:
         none = EventCounts(classes)
         for clip, _, _ in cache:
             event_counts(det, clip, None, none)
-        for stride in strides:
+        rows = [(stride, False) for stride in strides]
+        rows += [(int(x), True) for x in args.crops.split(",") if x]
+        for stride, tiles in rows:
             errs, p90, switches, cover, wrist, cpu_s, video_s = [], [], 0, [], [], 0.0, 0.0
             counts = EventCounts(classes)
+            kinds = {"full": 0, "tiles": 0}
             for clip, seq, cpu in cache:
-                kept = keep_stride(seq, stride)
                 look = sampled_frames(len(seq), stride)
+                if tiles:
+                    kept, took, k = pose_with_tiles(clip, stride)
+                    cpu_s += took
+                    kinds = {key: kinds[key] + k[key] for key in kinds}
+                else:
+                    kept = keep_stride(seq, stride)
+                    cpu_s += float(cpu[look].sum())
                 gt = clip.read_players(gt=True)
                 pred = players_from_poses(kept, clip.read_camera(gt=True), load_court(clip.court_path()),
                                           clip.info.fps, TrackingConfig())
@@ -148,11 +173,11 @@ def main() -> int:
                 cover.append(s.coverage)
                 wh = np.array([clip.info.width, clip.info.height], float)
                 wrist.append(wrist_error_px(pred, gt, look, wh))
-                cpu_s += float(cpu[look].sum())
                 video_s += len(seq) / clip.info.fps
                 event_counts(det, clip, pred, counts)
             fps = clips[0].info.fps
-            print(f"| {sport} | {stride} | {fps / stride:.1f} | {cpu_s / video_s:.2f} | {np.mean(errs):.3f} / "
+            name = f"{stride} + tiles ({kinds['tiles']} of {sum(kinds.values())} looks)" if tiles else f"{stride}"
+            print(f"| {sport} | {name} | {fps / stride:.1f} | {cpu_s / video_s:.2f} | {np.mean(errs):.3f} / "
                   f"{np.mean(p90):.3f} | {switches} | {np.mean(cover) * 100:.0f}% | {np.nanmean(wrist):.1f} | "
                   f"{counts.scores()['f1']:.3f} ({none.scores()['f1']:.3f}) |", flush=True)
     return 0

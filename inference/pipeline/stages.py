@@ -424,7 +424,7 @@ def _events_inputs(ctx: Context) -> dict[str, Path | None]:
 def _players_run(ctx: Context) -> Outcome:
     from inference.players.backends import make_backend
     from inference.players.sampling import pose_stride
-    from inference.players.tracking import TrackingConfig, players_from_poses
+    from inference.players.tracking import TrackingConfig, in_play_area, players_from_poses
 
     clip = ctx.clip
     if not clip.camera_path.is_file():
@@ -441,9 +441,10 @@ def _players_run(ctx: Context) -> Outcome:
         raise StageError(f"pose backend {name!r}: {reason}")
     active = _court_frames(ctx)  # close-ups and replays: no pose search, no player rows
     stride = pose_stride(clip.info.fps, ctx.cfg.pose_every)
-    poses = backend.run(clip, progress=ctx.cfg.progress, active=active, stride=stride)
-    players = players_from_poses(poses, clip.read_camera(), ctx.court, clip.info.fps, TrackingConfig(),
-                                 active=active)
+    camera = clip.read_camera()
+    poses = backend.run(clip, progress=ctx.cfg.progress, active=active, stride=stride,
+                        focus=in_play_area(camera, ctx.court))
+    players = players_from_poses(poses, camera, ctx.court, clip.info.fps, TrackingConfig(), active=active)
     clip.write_players(players)
     note = f"{len(players.ids())} players"
     if stride > 1:

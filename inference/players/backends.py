@@ -14,13 +14,15 @@ backends also ``infer(image) -> Persons`` for one RGB frame.
 from __future__ import annotations
 
 import importlib.util
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from inference.video.scenes import segments
 
+from .crops import CropLooks, TileMemory, concat, inside_tile, non_max, shifted, tiles_around
 from .sampling import sampled_frames
 from .types import J, Persons, PoseSequence
 
@@ -42,9 +44,10 @@ class ImportBackend:
             return False, f"predictions file {self.path} not found; pass --predictions FILE"
         return True, ""
 
-    def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1) -> PoseSequence:
+    def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1,
+            focus=None) -> PoseSequence:
         """The predictions of every frame (``active`` ``(N,) bool``: only these frames, the others empty;
-        ``stride`` is ignored: the file holds what the other tool looked at)."""
+        ``stride`` and ``focus`` are ignored: the file holds what the other tool looked at)."""
         from .importers import load_predictions
 
         poses = load_predictions(self.path, n_frames=clip.n_frames, fmt=self.fmt,
@@ -74,22 +77,36 @@ class _FrameBackend:
     def infer(self, image: np.ndarray) -> Persons:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1) -> PoseSequence:
+    def look(self, image: np.ndarray, previous: Persons | None) -> Persons:
+        """One look of a clip loop; ``previous``: the persons of the run's look before (None at a run's start).
+        The whole frame by default; :attr:`last_tiled` says whether the look posed tiles only."""
+        return self.infer(image)
+
+    last_tiled = False
+    focus = None
+
+    def run(self, clip, progress: bool = True, active: np.ndarray | None = None, stride: int = 1,
+            focus=None) -> PoseSequence:
         """Poses of the clip's frames.
 
         Args:
             active: (N,) bool, only these frames are decoded and posed (None: all).
             stride: pose every ``stride``-th of them (:func:`~inference.players.sampling.sampled_frames`), the
                 tracker fills the rest; 1: every frame.
+            focus: ``Persons`` → (N,) bool, the people a backend that poses tiles around people already seen
+                follows (:func:`~inference.players.tracking.in_play_area`); None: everybody.
         """
+        self.focus = focus
         ok, reason = self.available()
         if not ok:
             raise BackendUnavailable(f"pose backend {self.name!r} is unavailable: {reason}")
         from tqdm import tqdm
 
+        self.look_cpu_s = 0.0  # the looks' CPU seconds (decoding excluded)
         with clip.frames() as frames:
             n = len(frames)
             out = [Persons.empty() for _ in range(n)]
+            tiled = np.zeros(n, bool)
             inside = np.ones(n, bool)  # the court-view frames (beyond ``active``'s end: none)
             if active is not None:
                 given = np.asarray(active, bool)[:n]
@@ -101,14 +118,19 @@ class _FrameBackend:
                 look[a:b] = sampled_frames(b - a, stride)
             with tqdm(total=int(look.sum()), desc=f"pose {self.name}", unit="frame", disable=not progress) as bar:
                 for a, b in runs:
+                    previous = None  # a scene cut: nobody is known yet
                     for i, img in enumerate(frames.iter(a, b), start=a):
                         if look[i]:
-                            out[i] = self.infer(img)
+                            t0 = time.process_time()
+                            out[i] = previous = self.look(img, previous)
+                            tiled[i] = self.last_tiled
+                            self.look_cpu_s += time.process_time() - t0
                             bar.update()
+        kinds = tiled if tiled.any() else None
         if stride == 1:
-            return PoseSequence(out, self.name)
+            return PoseSequence(out, self.name, None, kinds)
         looked = look | (sampled_frames(n, stride) & ~inside)  # cuts: empty looks on the same grid
-        return PoseSequence(out, self.name, looked)
+        return PoseSequence(out, self.name, looked, kinds)
 
 
 @dataclass
@@ -160,17 +182,25 @@ class RTMPoseBackend(_FrameBackend):
 
 @dataclass
 class MoveNetBackend(_FrameBackend):
-    """MoveNet MultiPose Lightning (≤ 6 people, COCO-17) from a user-provided .tflite file."""
+    """MoveNet MultiPose Lightning (≤ 6 people, COCO-17) from a user-provided .tflite file.
+
+    In a clip loop most looks pose only tiles around the people of the look before (:mod:`.crops`,
+    ``crops``; ``None``: the whole frame at every look)."""
 
     model: Path | None = None
     input_size: int | None = None   # the long side, a multiple of 32; None: movenet_input_size's choice
     name: str = "movenet"
+    crops: CropLooks | None = field(default_factory=CropLooks)
 
     def __post_init__(self) -> None:
         if self.model is None:
             from .movenet_fetch import MODEL_PATH
 
             self.model = MODEL_PATH
+        self._interps: dict[tuple[int, int], object] = {}
+        self._since_full = 0
+        self._memory = TileMemory.of(Persons.empty(), 0.0)
+        self.looks = {"full": 0, "tiles": 0}  # looks of each kind (a tile look that fell back counts as full)
 
     def available(self) -> tuple[bool, str]:
         mods = _missing_modules("ai_edge_litert")
@@ -181,27 +211,76 @@ class MoveNetBackend(_FrameBackend):
                            "inference.players.movenet_fetch` (make does it) or give --model FILE.tflite")
         return True, ""
 
-    def infer(self, image: np.ndarray) -> Persons:
+    def _scale(self, h: int, w: int) -> float:
+        return movenet_input_size(h, w, self.input_size) / max(h, w)
+
+    def _pose(self, image: np.ndarray, scale: float, canvas_hw: tuple[int, int]) -> Persons:
+        """MoveNet on ``image`` resized by ``scale`` into a zero canvas of ``canvas_hw``: persons in ``image`` px."""
         import cv2
         from ai_edge_litert.interpreter import Interpreter
 
+        it = self._interps.get(canvas_hw)
+        if it is None:
+            it = Interpreter(model_path=str(self.model))
+            it.resize_tensor_input(it.get_input_details()[0]["index"], [1, *canvas_hw, 3])
+            it.allocate_tensors()
+            self._interps[canvas_hw] = it
         h, w = image.shape[:2]
-        scale = movenet_input_size(h, w, self.input_size) / max(h, w)
-        ih, iw = (int(np.ceil(h * scale / 32) * 32), int(np.ceil(w * scale / 32) * 32))
-        if not hasattr(self, "_interp") or self._shape != (ih, iw):
-            self._interp = Interpreter(model_path=str(self.model))
-            inp = self._interp.get_input_details()[0]["index"]
-            self._interp.resize_tensor_input(inp, [1, ih, iw, 3])
-            self._interp.allocate_tensors()
-            self._shape = (ih, iw)
-        canvas = np.zeros((ih, iw, 3), np.uint8)
-        small = cv2.resize(image, (int(round(w * scale)), int(round(h * scale))))
-        canvas[: small.shape[0], : small.shape[1]] = small
-        it = self._interp
+        canvas = np.zeros((*canvas_hw, 3), np.uint8)
+        small = cv2.resize(image, (max(1, int(round(w * scale))), max(1, int(round(h * scale)))))
+        sh, sw = min(small.shape[0], canvas_hw[0]), min(small.shape[1], canvas_hw[1])
+        canvas[:sh, :sw] = small[:sh, :sw]
         it.set_tensor(it.get_input_details()[0]["index"], canvas[None])
         it.invoke()
-        raw = it.get_tensor(it.get_output_details()[0]["index"])[0]
-        return decode_movenet(raw, (ih, iw), scale)
+        return decode_movenet(it.get_tensor(it.get_output_details()[0]["index"])[0], canvas_hw, scale)
+
+    def infer(self, image: np.ndarray) -> Persons:
+        """The whole frame (H, W, 3) RGB."""
+        h, w = image.shape[:2]
+        scale = self._scale(h, w)
+        self._shape = (int(np.ceil(h * scale / 32) * 32), int(np.ceil(w * scale / 32) * 32))
+        return self._pose(image, scale, self._shape)
+
+    def look(self, image: np.ndarray, previous: Persons | None) -> Persons:
+        """Tiles around the people seen lately (:class:`~.crops.TileMemory`, those :attr:`focus` keeps) when
+        :attr:`crops` allows it, else (and when a tile loses a confident person) the whole frame. ``previous``
+        None: a run's first look."""
+        cfg = self.crops
+        if cfg is not None and previous is not None and self._since_full + 1 < cfg.full_every \
+                and 0 < len(self._memory) <= cfg.max_tiles:
+            due = self._memory.due(self._since_full + 1, cfg)
+            persons = self._tiles(image, self._memory.boxes[due], cfg)
+            if not self._memory.update(self._followed(persons), cfg, only=due):
+                self._since_full += 1
+                self.looks["tiles"] += 1
+                self.last_tiled = True
+                return persons
+        self._since_full = 0
+        self.looks["full"] += 1
+        self.last_tiled = False
+        persons = self.infer(image)
+        if cfg is not None:
+            if previous is None:
+                self._memory = TileMemory.of(self._followed(persons), cfg.min_score)
+            else:  # somebody this look missed keeps a tile a few looks more
+                self._memory.update(self._followed(persons), cfg, whole=True)
+        return persons
+
+    def _followed(self, persons: Persons) -> Persons:
+        return persons if self.focus is None else persons.select(np.asarray(self.focus(persons), bool))
+
+    def _tiles(self, image: np.ndarray, boxes: np.ndarray, cfg: CropLooks) -> Persons:
+        h, w = image.shape[:2]
+        scale = self._scale(h, w)
+        parts = []
+        for tile in tiles_around(boxes, (h, w), cfg.margin):
+            x1, y1, x2, y2 = (int(v) for v in tile)
+            native = max(x2 - x1, y2 - y1)
+            zoom = min(max(scale, cfg.min_side / native), max(scale, cfg.max_zoom))
+            q = int(np.ceil(native * zoom / cfg.quantum) * cfg.quantum)
+            found = shifted(self._pose(image[y1:y2, x1:x2], zoom, (q, q)), x1, y1)
+            parts.append(found.select(inside_tile(found, tile, (h, w))))
+        return non_max(concat(parts))
 
 
 def movenet_input_size(h: int, w: int, requested: int | None = None) -> int:

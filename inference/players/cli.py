@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .backends import BackendUnavailable, make_backend
     from .sampling import pose_stride
-    from .tracking import TrackingConfig, players_from_poses
+    from .tracking import TrackingConfig, in_play_area, players_from_poses
 
     clip = Clip(args.clip)
     camera = clip.read_camera(gt=args.gt_camera)
@@ -63,8 +63,10 @@ def run(args: argparse.Namespace) -> int:
     target = args.out or clip.players_path
     old = read_players_csv(target) if span.active and target.is_file() else None  # a bad file fails now
     active = span.mask(clip.info.fps, clip.n_frames) if span.active else None
-    poses = backend.run(clip, active=active, stride=pose_stride(clip.info.fps, args.pose_every))
-    players = players_from_poses(poses, camera, court, clip.info.fps, TrackingConfig(tracker=args.tracker))
+    tracking = TrackingConfig(tracker=args.tracker)
+    poses = backend.run(clip, active=active, stride=pose_stride(clip.info.fps, args.pose_every),
+                        focus=in_play_area(camera, court, tracking))
+    players = players_from_poses(poses, camera, court, clip.info.fps, tracking)
     if span.active:
         first, stop = span.frames(clip.info.fps, clip.n_frames)
         print(f"players: {span.describe(clip.info.fps, clip.n_frames)} only")

@@ -89,11 +89,23 @@ def _make_tracker(cfg: TrackingConfig, fps: float):
     return trackers.SORTTracker(track_activation_threshold=cfg.activation * 0.5, **common)
 
 
-def confidence_scale(seq: PoseSequence) -> float:
-    """The 90th percentile of the clip's person scores: pose models differ in score scale (MoveNet's are
-    often 0.2–0.5, RTMPose's box scores 0.5–0.9), so scores are divided by it before tracking."""
-    scores = np.concatenate([p.scores for p in seq.frames if len(p)] or [np.ones(1)])
+def confidence_scale(seq: PoseSequence, frames: np.ndarray | None = None) -> float:
+    """The 90th percentile of the clip's person scores (of ``frames`` (N,) bool only, when given): pose models
+    differ in score scale (MoveNet's are often 0.2–0.5, RTMPose's box scores 0.5–0.9), so scores are divided by
+    it before tracking."""
+    scores = np.concatenate([p.scores for i, p in enumerate(seq.frames) if len(p) and (frames is None or frames[i])]
+                            or [np.ones(1)])
     return float(max(np.percentile(scores, 90), 1e-6))
+
+
+def confidence_scales(seq: PoseSequence) -> np.ndarray:
+    """(N,) the divisor of each frame's person scores: :func:`confidence_scale` of its kind of look (whole
+    frame, or tiles around people already seen: :attr:`PoseSequence.tiled`)."""
+    if seq.tiled is None or not np.asarray(seq.tiled).any():
+        return np.full(len(seq), confidence_scale(seq))
+    tiled = np.zeros(len(seq), bool)
+    tiled[: len(seq.tiled)] = np.asarray(seq.tiled, bool)[: len(seq)]
+    return np.where(tiled, confidence_scale(seq, tiled), confidence_scale(seq, ~tiled))
 
 
 def track_people(seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingConfig) -> list[Track]:
@@ -106,14 +118,14 @@ def track_people(seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingCon
     if step > 1:  # posed every N-th frame: the tracker runs at the rate of the looks, confirming a track as soon
         cfg = replace(cfg, min_consecutive=max(1, int(round(cfg.min_consecutive / step))))  # (in time)
     tracker = _make_tracker(cfg, fps / step)
-    scale = confidence_scale(seq)
+    scale = confidence_scales(seq)
     rows: dict[int, list] = {}
     for f in looked.tolist():
         persons = seq.frames[f]
         keep = persons.scores >= cfg.min_person_score
         keep &= np.isfinite(persons.boxes).all(axis=1) & (persons.boxes[:, 2] > persons.boxes[:, 0])
         p = persons.select(keep)
-        conf = np.clip(p.scores / scale, 0.0, 1.0).astype(np.float32)
+        conf = np.clip(p.scores / scale[f], 0.0, 1.0).astype(np.float32)
         det = sv.Detections(xyxy=p.boxes.astype(np.float32), confidence=conf,
                             class_id=np.zeros(len(p), int), data={"idx": np.arange(len(p))})
         out = tracker.update(det)
@@ -184,6 +196,25 @@ def on_court(court_xy: np.ndarray, court: Court, margin: float) -> np.ndarray:
     r = player_area(court, margin)
     with np.errstate(invalid="ignore"):
         return ((x >= r[:, 0]) & (x <= r[:, 1]) & (y >= r[:, 2]) & (y <= r[:, 3])).any(axis=1)
+
+
+def in_play_area(camera: Camera, court: Court, cfg: TrackingConfig | None = None, slack_m: float = 2.0):
+    """A pose backend's ``focus``: ``Persons`` → (N,) bool, False for those whose feet stand on the floor more than
+    ``slack_m`` outside the sport's playing area (:func:`player_area`: spectators, people beside the next court),
+    whom player selection would drop anyway; True where the feet are not seen."""
+    cfg = cfg or TrackingConfig()
+    area = player_area(court, cfg.court_margin)
+
+    def focus(persons: Persons) -> np.ndarray:
+        xy = court_positions(persons.keypoints, persons.kp_scores, camera, cfg.ankle_height, cfg.min_kp_score)
+        known = np.isfinite(xy).all(axis=1)
+        r, x, y = area, xy[:, 0:1], xy[:, 1:2]
+        with np.errstate(invalid="ignore"):
+            inside = ((x >= r[:, 0] - slack_m) & (x <= r[:, 1] + slack_m)
+                      & (y >= r[:, 2] - slack_m) & (y <= r[:, 3] + slack_m)).any(axis=1)
+        return ~known | inside
+
+    return focus
 
 
 def spread_m(t: Track) -> float:
@@ -314,7 +345,7 @@ def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: flo
 def only_frames(seq: PoseSequence, active: np.ndarray) -> PoseSequence:
     """``seq`` with nobody in the frames where ``active`` is False (or beyond its end)."""
     kept = [p if i < len(active) and active[i] else Persons.empty() for i, p in enumerate(seq.frames)]
-    return PoseSequence(kept, seq.source, seq.looked)
+    return PoseSequence(kept, seq.source, seq.looked, seq.tiled)
 
 
 def take_frames(t: Track, keep: np.ndarray) -> Track:

@@ -79,11 +79,15 @@ class PoseSequence:
         looked: (N,) bool, the frames the model looked at on its grid (posing every N-th frame,
             :func:`~inference.players.sampling.sampled_frames`; outside the court views, empty frames on the same
             grid), None: every frame. The tracker runs on these frames and fills the others.
+        tiled: (N,) bool, the looks that posed only tiles around people already seen
+            (:mod:`~inference.players.crops`): their person scores run higher than a whole frame's, so the tracker
+            scales the two kinds apart; None: no such look.
     """
 
     frames: list[Persons]
     source: str = ""
     looked: np.ndarray | None = None
+    tiled: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.frames)
