@@ -57,7 +57,7 @@ class EveryFramePoses:
         return True, ""
 
     def run(self, clip: Clip, progress: bool = True, active: np.ndarray | None = None,
-            stride: int = 1) -> PoseSequence:
+            stride: int = 1, focus=None) -> PoseSequence:
         frames = []  # every frame, whatever the stride: the tracker then runs at the clip's rate
         for f in range(clip.n_frames):
             m = self.truth.frame == f
