@@ -77,9 +77,9 @@ class _FrameBackend:
     def infer(self, image: np.ndarray) -> Persons:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def look(self, image: np.ndarray, previous: Persons | None) -> Persons:
-        """One look of a clip loop; ``previous``: the persons of the run's look before (None at a run's start).
-        The whole frame by default; :attr:`last_tiled` says whether the look posed tiles only."""
+    def look(self, image: np.ndarray, start: bool) -> Persons:
+        """One look of a clip loop (``start``: the first of a run of court-view frames). The whole frame by
+        default; :attr:`last_tiled` says whether the look posed tiles only."""
         return self.infer(image)
 
     last_tiled = False
@@ -118,11 +118,12 @@ class _FrameBackend:
                 look[a:b] = sampled_frames(b - a, stride)
             with tqdm(total=int(look.sum()), desc=f"pose {self.name}", unit="frame", disable=not progress) as bar:
                 for a, b in runs:
-                    previous = None  # a scene cut: nobody is known yet
+                    start = True  # a scene cut: nobody is known yet
                     for i, img in enumerate(frames.iter(a, b), start=a):
                         if look[i]:
                             t0 = time.process_time()
-                            out[i] = previous = self.look(img, previous)
+                            out[i] = self.look(img, start)
+                            start = False
                             tiled[i] = self.last_tiled
                             self.look_cpu_s += time.process_time() - t0
                             bar.update()
@@ -241,12 +242,12 @@ class MoveNetBackend(_FrameBackend):
         self._shape = (int(np.ceil(h * scale / 32) * 32), int(np.ceil(w * scale / 32) * 32))
         return self._pose(image, scale, self._shape)
 
-    def look(self, image: np.ndarray, previous: Persons | None) -> Persons:
+    def look(self, image: np.ndarray, start: bool) -> Persons:
         """Tiles around the people seen lately (:class:`~.crops.TileMemory`, those :attr:`focus` keeps) when
-        :attr:`crops` allows it, else (and when a tile loses a confident person) the whole frame. ``previous``
-        None: a run's first look."""
+        :attr:`crops` allows it, else (and at a run's ``start``, and when a tile loses a confident person) the
+        whole frame."""
         cfg = self.crops
-        if cfg is not None and previous is not None and self._since_full + 1 < cfg.full_every \
+        if cfg is not None and not start and self._since_full + 1 < cfg.full_every \
                 and 0 < len(self._memory) <= cfg.max_tiles:
             due = self._memory.due(self._since_full + 1, cfg)
             persons = self._tiles(image, self._memory.boxes[due], cfg)
@@ -260,7 +261,7 @@ class MoveNetBackend(_FrameBackend):
         self.last_tiled = False
         persons = self.infer(image)
         if cfg is not None:
-            if previous is None:
+            if start:
                 self._memory = TileMemory.of(self._followed(persons), cfg.min_score)
             else:  # somebody this look missed keeps a tile a few looks more
                 self._memory.update(self._followed(persons), cfg, whole=True)

@@ -1,10 +1,9 @@
-"""Pose on crops around the people already found: the geometry of a crop look.
+"""Pose on tiles around the people already seen: the geometry of a tile look.
 
 A whole-frame look runs the pose model on the frame scaled to its input size (1080p: 960 × 544 px). Players move
-little between two looks (~1/15 s), so most looks only need the pose model on a tile around each person of the
-previous look, at the same scale as a whole-frame look: the same pixels per player for a fraction of the input
-(1080p tennis: two tiles of ~256² and ~128² px instead of 960 × 544). A whole-frame look still comes every
-``full_every``-th look (somebody new walks in) and whenever a tile loses its person.
+little between two looks (~1/15 s), so most looks only need the pose model on a tile around each person seen
+lately (:class:`TileMemory`), small tiles zoomed up: a fraction of the input's pixels. A whole-frame look still
+comes every ``full_every``-th look (somebody new walks in) and whenever a tile loses a confident person.
 
 Pure geometry here (boxes in, tiles and kept persons out); :class:`~inference.players.backends.MoveNetBackend`
 runs the model on the tiles.
@@ -111,25 +110,13 @@ def inside_tile(persons: Persons, tile: np.ndarray, frame_hw: tuple[int, int], e
 
 
 def non_max(persons: Persons, iou: float = 0.5) -> Persons:
-    """The persons left after dropping any whose box overlaps a higher-scoring one's by IoU > ``iou``."""
-    order = np.argsort(-persons.scores, kind="stable")
-    keep: list[int] = []
-    b = persons.boxes
-    area = np.clip(b[:, 2] - b[:, 0], 0, None) * np.clip(b[:, 3] - b[:, 1], 0, None)
-    for i in order:
-        clash = False
-        for k in keep:
-            ix = max(0.0, min(b[i, 2], b[k, 2]) - max(b[i, 0], b[k, 0]))
-            iy = max(0.0, min(b[i, 3], b[k, 3]) - max(b[i, 1], b[k, 1]))
-            inter = ix * iy
-            if inter > iou * (area[i] + area[k] - inter + 1e-9):
-                clash = True
-                break
-        if not clash:
-            keep.append(int(i))
-    mask = np.zeros(len(persons), bool)
-    mask[keep] = True
-    return persons.select(mask)
+    """The persons left after dropping any whose box overlaps a higher-scoring one's by IoU > ``iou``
+    (supervision's greedy non-maximum suppression)."""
+    import supervision as sv
+
+    if len(persons) < 2:
+        return persons
+    return persons.select(sv.box_non_max_suppression(np.c_[persons.boxes, persons.scores], iou))
 
 
 def concat(parts: list[Persons]) -> Persons:

@@ -190,12 +190,13 @@ def player_area(court: Court, margin: float = 1.5) -> np.ndarray:
     return out
 
 
-def on_court(court_xy: np.ndarray, court: Court, margin: float) -> np.ndarray:
-    """(T, 2) positions → (T,) inside the sport's playing area (:func:`player_area`)."""
+def on_court(court_xy: np.ndarray, court: Court, margin: float, slack_m: float = 0.0) -> np.ndarray:
+    """(T, 2) positions → (T,) inside the sport's playing area (:func:`player_area`), grown by ``slack_m``."""
     x, y = court_xy[:, 0:1], court_xy[:, 1:2]
     r = player_area(court, margin)
     with np.errstate(invalid="ignore"):
-        return ((x >= r[:, 0]) & (x <= r[:, 1]) & (y >= r[:, 2]) & (y <= r[:, 3])).any(axis=1)
+        return ((x >= r[:, 0] - slack_m) & (x <= r[:, 1] + slack_m)
+                & (y >= r[:, 2] - slack_m) & (y <= r[:, 3] + slack_m)).any(axis=1)
 
 
 def in_play_area(camera: Camera, court: Court, cfg: TrackingConfig | None = None, slack_m: float = 2.0):
@@ -203,16 +204,11 @@ def in_play_area(camera: Camera, court: Court, cfg: TrackingConfig | None = None
     ``slack_m`` outside the sport's playing area (:func:`player_area`: spectators, people beside the next court),
     whom player selection would drop anyway; True where the feet are not seen."""
     cfg = cfg or TrackingConfig()
-    area = player_area(court, cfg.court_margin)
+    player_area(court, cfg.court_margin)  # a bad player_area fails here, not at the first look
 
     def focus(persons: Persons) -> np.ndarray:
         xy = court_positions(persons.keypoints, persons.kp_scores, camera, cfg.ankle_height, cfg.min_kp_score)
-        known = np.isfinite(xy).all(axis=1)
-        r, x, y = area, xy[:, 0:1], xy[:, 1:2]
-        with np.errstate(invalid="ignore"):
-            inside = ((x >= r[:, 0] - slack_m) & (x <= r[:, 1] + slack_m)
-                      & (y >= r[:, 2] - slack_m) & (y <= r[:, 3] + slack_m)).any(axis=1)
-        return ~known | inside
+        return ~np.isfinite(xy).all(axis=1) | on_court(xy, court, cfg.court_margin, slack_m)
 
     return focus
 

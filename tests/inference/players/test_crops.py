@@ -110,10 +110,10 @@ def test_a_tile_that_loses_its_player_falls_back_to_the_whole_frame(movenet):
     movenet._since_full = 0
     ghost = persons([[5, 5, 40, 80]], [0.95])            # the top-left corner: stands and sky, no player
     movenet._memory = TileMemory.of(ghost, 0.1)
-    found = movenet.look(frame, ghost)
+    found = movenet.look(frame, start=False)
     assert movenet.looks == {"full": 1, "tiles": 0}
     assert len(found) == len(whole) and np.allclose(found.boxes, whole.boxes)
     movenet._since_full = 0
-    again = movenet.look(frame, found)                   # the players are where they were: tiles suffice
+    again = movenet.look(frame, start=False)                  # the players are where they were: tiles suffice
     assert movenet.looks == {"full": 1, "tiles": 1} and movenet.last_tiled
     assert (again.scores >= 0.2).sum() >= 2
