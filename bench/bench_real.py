@@ -90,6 +90,23 @@ def log(msg: str) -> None:
 
 
 # --------------------------------------------------------------------------------------- tennis points
+#: far-hit gap bins (frames missing around the contact): name → (shortest, longest)
+FAR_GAP_BINS = {"0": (0, 0), "1-3": (1, 3), "4-12": (4, 12), "13-20": (13, 20), "21+": (21, 10 ** 9)}
+
+
+def far_gaps(seen: np.ndarray, labels: np.ndarray, found: np.ndarray, bins: dict) -> None:
+    """Count labelled far hits ``labels (K,)`` and those with a far-hit prediction in ``found (M,)`` within ±TOL,
+    by the length of the track's gap (``seen (T,) bool``) at or within ±2 frames of the contact, into ``bins``."""
+    from inference.events.gaps import gap_around
+
+    for f in labels:
+        g = gap_around(seen, int(f), reach=2)
+        n = 0 if g is None else g[1] - g[0] + 1
+        key = next(k for k, (lo, hi) in FAR_GAP_BINS.items() if lo <= n <= hi)
+        bins[key][1] += 1
+        bins[key][0] += int(np.any(np.abs(found - f) <= TOL))
+
+
 def tennis_points(real: Path, table: Table, args) -> dict:
     """The shipped tennis event model on the RG2025 points' real tracker tracks, against the hand labels."""
     import torch
@@ -114,6 +131,7 @@ def tennis_points(real: Path, table: Table, args) -> dict:
     per_point_fp_before = 0
     unaligned: list[str] = []
     serves = {"player_near": [0, 0], "player_far": [0, 0]}  # found, labelled: the point's first event, a hit
+    far_by_gap = {k: [0, 0] for k in FAR_GAP_BINS}   # found, labelled: far hits by the track's gap at the contact
     for i, d in enumerate(points):
         clip = Clip(d)
         info = clip.info
@@ -140,6 +158,8 @@ def tennis_points(real: Path, table: Table, args) -> dict:
         span = pm & (pf >= gf.min() - TOL) & (pf <= gf.max() + TOL) if len(gf) else np.zeros(len(pf), bool)
         counts["labelled_span"].add(gf, gc, pf[span], pc[span], TOL)
         per_point_fp_before += int(np.sum(pm & (pf < (gf.min() - TOL if len(gf) else b + 1))))
+        far_gaps(ball.dense(info.n_frames).visibility > 0, gf[gc == cs.index("player_far")],
+                 pf[pm & (pc == cs.index("player_far"))], far_by_gap)
         if len(gf) and cs.classes[gc[0]] in serves:
             hit = serves[cs.classes[gc[0]]]
             hit[1] += 1
@@ -165,6 +185,9 @@ def tennis_points(real: Path, table: Table, args) -> dict:
         table.add(part, f"serves, {side.split('_')[1]} server", r=found / n if n else float("nan"),
                   more=f"{found} of {n} found (recall; the point's first label)")
         out[f"serves_{side.split('_')[1]}"] = {"found": found, "labelled": n}
+    table.add(part, "far hits by the gap at the contact", more="; ".join(
+        f"{k} frames {found}/{n} found" for k, (found, n) in far_by_gap.items()) + " (missing frames within ±2 of the label)")
+    out["far_by_gap"] = {k: {"found": f, "labelled": n} for k, (f, n) in far_by_gap.items()}
     table.add(part, "model / tolerance", more=f"{weights.name}, ball only (no players, no camera), "
               f"every event kept; ±{TOL} frames at 50 fps; {len(points) - len(unaligned)} of {len(points)} points "
               f"scored ({len(unaligned)} have every label outside their tracked_window, not aligned with the "
