@@ -18,8 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clips", type=int, default=20, help="number of clips (default 20)")
     p.add_argument("--out", type=Path, required=True, help="dataset folder to write")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--camera", help="camera preset (padel_installed, padel_broadcast, tennis_broadcast, tennis_high; "
-                   "default per sport)")
+    p.add_argument("--camera", help="camera preset (padel_installed, padel_broadcast, padel_tv, tennis_broadcast, "
+                   "tennis_high, tennis_tv; default per sport)")
     p.add_argument("--fixed-camera", action="store_true", help="do not randomise the camera preset")
     p.add_argument("--plain", action="store_true", help="clean look: no noise, no JPEG, neutral colours")
     p.add_argument("--fps", type=float, help="fix the frame rate (default: drawn from 25, 30, 50, 60)")
@@ -31,6 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--around-point", action="store_true",
                    help="add the server's bounces before the serve and the ball after the point (not events; "
                    "gt/rally.yaml marks the point)")
+    p.add_argument("--venue", choices=["club", "tour"], default="club",
+                   help="club (default look) or tour (padel: a tour event as broadcast — bright glass rails and "
+                   "posts, the court's outline unpainted, floor logos, a score box, an advertising board; use "
+                   "it with --camera padel_tv)")
+    p.add_argument("--mid-rally", action="store_true",
+                   help="cut each clip's start in the middle of a flight after the serve, as broadcast clips are "
+                   "(no serve in the clip)")
     p.set_defaults(func=run)
 
 
@@ -51,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     config = SynthConfig(sport=args.sport, camera=args.camera, randomise_camera=not args.fixed_camera,
                          fps=args.fps, width=width, height=height, randomise_look=not args.plain,
                          codec=args.codec, click_noise_px=args.click_noise, max_frames=args.max_frames,
-                         around_point=args.around_point)
+                         around_point=args.around_point, venue=args.venue, mid_rally=args.mid_rally)
     frames = [0]
     t0 = time.perf_counter()
     with tqdm(total=args.clips, unit="clip", desc=f"synth {args.sport}") as bar:

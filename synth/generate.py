@@ -62,6 +62,10 @@ class SynthConfig:
             :meth:`Appearance.tour`: bright rails and posts, the court's outline unpainted, floor logos, a
             score box, an advertising board that may hide the near baseline), drawn from its own stream: the
             other draws are unchanged.
+        mid_rally: cut the clip's start inside the rally, as a broadcast's or a highlight's clip often is:
+            it opens in the middle of a flight between two racket hits after the serve (the second and third
+            hits, or the first and second of a short rally), drawn from its own stream; the serve and what
+            came before are not in the clip, no ``gt/rally.yaml`` is written. Off by default.
     """
 
     sport: str = "padel"
@@ -79,6 +83,7 @@ class SynthConfig:
     look_shift: bool = False
     around_point: bool = False
     venue: str = "club"
+    mid_rally: bool = False
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -144,6 +149,35 @@ def player_tracks(infos: list[FrameInfo], poses: list[PlayerPose], size: tuple[i
                         np.array(rows["court"]).reshape(n, 2), np.array(rows["j3d"]).reshape(n, 17, 3))
 
 
+def mid_rally_start(rally: Rally, rng: np.random.Generator) -> int:
+    """A frame inside a flight between two racket hits of the point (the 2nd and 3rd, else the 1st and 2nd),
+    drawn in its middle 60 %; 0 when the rally has fewer than two hits."""
+    hits = [c.t for c in rally.contacts if c.in_rally and c.player is not None]
+    if len(hits) < 2:
+        return 0
+    a, b = (hits[1], hits[2]) if len(hits) >= 3 else (hits[0], hits[1])
+    t = a + (b - a) * rng.uniform(0.2, 0.8)
+    return int(np.clip(round(t * rally.fps), 0, rally.n_frames - 1))
+
+
+def _cut_start(rally: Rally, start: int) -> Rally:
+    """The rally seen from frame ``start`` on: every time moves by ``-start / fps``; contacts before the new
+    start are dropped, the serve is no longer in the clip (``t_serve`` None)."""
+    if start <= 0:
+        return rally
+    dt = start / rally.fps
+    tol = 0.5 / rally.fps
+    ball = replace(rally.ball, t=rally.ball.t - dt)
+    contacts = [replace(c, t=c.t - dt) for c in rally.contacts if c.t - dt >= tol]
+    players = [replace(p, t=p.t[start:] - dt, root=np.asarray(p.root)[start:], heading=np.asarray(p.heading)[start:],
+                       swings=[replace(s, t_hit=s.t_hit - dt) for s in p.swings]) for p in rally.players]
+    inactive = [replace(b, first=b.first - start, last=b.last - start) for b in rally.inactive_balls
+                if b.last - start >= 0]
+    return replace(rally, n_frames=rally.n_frames - start, ball=ball, contacts=contacts, players=players,
+                   inactive_balls=inactive, t_serve=None,
+                   t_dead=None if rally.t_dead is None else rally.t_dead - dt)
+
+
 def _trim(rally: Rally, max_frames: int | None) -> Rally:
     if not max_frames or rally.n_frames <= max_frames:
         return rally
@@ -184,7 +218,10 @@ class SynthScene:
         rally_cfg = default_config(config.sport)
         if config.around_point:
             rally_cfg = replace(rally_cfg, around=REAL_AROUND)
-        rally = _trim(simulate_rally(court, spec.fps, r_rally, sport=config.sport, config=rally_cfg), config.max_frames)
+        rally = simulate_rally(court, spec.fps, r_rally, sport=config.sport, config=rally_cfg)
+        if config.mid_rally:
+            rally = _cut_start(rally, mid_rally_start(rally, np.random.default_rng([seed, 13])))
+        rally = _trim(rally, config.max_frames)
         poses = [articulate(p, spec.fps, r_body, sport=config.sport) for p in rally.players]
         renderer = CourtRenderer(court, camera, look, seed=int(seq.generate_state(1)[0]))
         return cls(court, spec, camera, look, rally, poses, renderer, r_points)

@@ -319,6 +319,45 @@ def augment_batch(x: torch.Tensor, y: torch.Tensor, features: FeatureConfig, cfg
 
 
 # -------------------------------------------------------------------------------------- data module
+def camera_shares(cameras: dict | None) -> dict[str, float] | None:
+    """``data.cameras`` checked: ``{preset: share}`` with known presets and positive shares summing to 1 (None
+    stays None).
+
+    Raises:
+        ValueError: naming the preset or the share to fix.
+    """
+    if cameras is None:
+        return None
+    from synth.cameras import CameraSpec
+
+    if not isinstance(cameras, dict) or not cameras:
+        raise ValueError(f"data.cameras must map camera presets to shares, e.g. {{padel_installed: 0.5, padel_tv: 0.5}}; "
+                         f"got {cameras!r}")
+    out = {}
+    for name, share in cameras.items():
+        try:
+            CameraSpec.preset(str(name))
+        except KeyError as e:
+            raise ValueError(f"data.cameras: {e.args[0]}") from None
+        if not isinstance(share, (int, float)) or not share > 0:
+            raise ValueError(f"data.cameras.{name}: a share must be a positive number, got {share!r}")
+        out[str(name)] = float(share)
+    total = sum(out.values())
+    if abs(total - 1.0) > 1e-6:
+        raise ValueError(f"data.cameras: the shares add up to {total:g}, not 1")
+    return out
+
+
+def split_counts(n: int, shares: dict[str, float]) -> dict[str, int]:
+    """``n`` clips split in proportion to ``shares`` (largest remainders; the counts add up to ``n``)."""
+    names = list(shares)
+    raw = np.array([shares[k] * n for k in names])
+    counts = np.floor(raw).astype(int)
+    for i in np.argsort(-(raw - counts), kind="stable")[:n - int(counts.sum())]:
+        counts[i] += 1
+    return {k: int(c) for k, c in zip(names, counts)}
+
+
 class EventDataModule(L.LightningDataModule):
     """Windows for HitNet training, or crops of whole clips for the event tagger (``sequence``; see the
     module docstring for the sources).
@@ -338,6 +377,9 @@ class EventDataModule(L.LightningDataModule):
             groundstrokes from deeper, :data:`synth.rally.TENNIS_TOUR`); the rest at the club pace.
         tour_camera: the camera preset that films the tour-pace clips (:mod:`synth.cameras`; ``tennis_tv``: a
             tour broadcast's long lens far behind the baseline); None: the sport's default camera.
+        cameras: the camera presets that film the club-pace clips and their shares, e.g. ``{padel_installed: 0.5,
+            padel_tv: 0.5}`` (a club's fixed camera beside a tour broadcast's); None: the sport's default camera
+            (each preset's clips have their own seeds: the default set is unchanged).
         degrade: :class:`~training.events.synthetic.degrade.DegradeConfig` fields: train on detector-like tracks
             (new draws each epoch) and validate on the clean clips plus ``val_copies`` degraded copies;
             None or ``enabled: false`` keeps the annotated tracks.
@@ -362,7 +404,7 @@ class EventDataModule(L.LightningDataModule):
                  degrade: dict | None = None, root_weights: list[float] | None = None,
                  split_seed: int | None = None, around: float = 0.0, pose_noise: dict | None = None,
                  sequence: int = 0, sequence_radius: int = 1, sequence_repeats: int = 2, prep_workers: int = 0,
-                 tour: float = 0.0, tour_camera: str | None = None):
+                 tour: float = 0.0, tour_camera: str | None = None, cameras: dict | None = None):
         super().__init__()
         if source not in ("synthetic", "folder"):
             raise ValueError(f"data.source must be 'synthetic' or 'folder', got {source!r}")
@@ -402,6 +444,7 @@ class EventDataModule(L.LightningDataModule):
             except KeyError as e:
                 raise ValueError(f"data.tour_camera: {e.args[0]}") from None
         self.tour_camera = None if tour_camera is None else str(tour_camera)
+        self.cameras = camera_shares(cameras)
         self._sources = None
         self.clip_source: dict[str, list[int]] = {}  # per split: the root index of each clip
         self.counts = {"train": n_train, "val": n_val, "test": n_test}
@@ -444,10 +487,14 @@ class EventDataModule(L.LightningDataModule):
             pl = self.features.poses  # players articulated and projected only when the model reads them
             w = self.prep_workers
             clips = []
-            for pace, n_pace, base in (("club", n - n_tour, self.seed * 10 + offset),
-                                       ("tour", n_tour, self.seed * 10 + offset + 1000)):
+            groups = [("tour", n_tour, self.seed * 10 + offset + 1000, self.tour_camera)]
+            if self.cameras is None:
+                groups.insert(0, ("club", n - n_tour, self.seed * 10 + offset, None))
+            else:
+                for i, (cam, n_cam) in enumerate(split_counts(n - n_tour, self.cameras).items()):
+                    groups.insert(i, ("club", n_cam, self.seed * 10 + offset + 3000 + 100 * i, cam))
+            for pace, n_pace, base, cam in groups:
                 n_around = int(round(self.around * n_pace))
-                cam = self.tour_camera if pace == "tour" else None
                 if n_pace > n_around:
                     clips += simulate_clips(self.sport, n_pace - n_around, base, self.cache_dir, players=pl,
                                             workers=w, pace=pace, camera=cam)
