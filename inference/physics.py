@@ -169,6 +169,111 @@ def rk4_step(state: tuple, h: float, c: tuple[float, ...], factors: tuple | None
     )
 
 
+def rk4_path(state: tuple, h: np.ndarray, c: tuple, factors: tuple, nodes: int, substeps: int
+             ) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Positions and velocities of a batch at ``nodes`` grid points, ``substeps`` :func:`rk4_step` steps of ``h``
+    apart: the loop a multiple shooting fit runs for every flight and every perturbation.
+
+    Args:
+        state: 9-component state of (B,) arrays at the first grid point.
+        h: (B,) step per ball (s; negative integrates backwards); c: ``FlightModel.kernel()``, whose drag may be a
+            (B,) array (one scale per ball); factors: ``spin_factors(h, c[5])``.
+    Returns:
+        ``P (nodes, 3, B)``, ``V (nodes, 3, B)`` and the state after the last node's steps (the last node's).
+
+    With numba installed the loop is compiled (one pass over the balls, the same arithmetic as
+    :func:`rk4_step`: the results agree to the last bits; ~20× faster at a 3D fit's batch sizes); without it,
+    :func:`rk4_step` runs on the arrays.
+    """
+    B = len(state[0])
+    kernel = path_kernel()
+    if kernel is not None and nodes > 0:
+        st = np.ascontiguousarray(np.stack([np.broadcast_to(np.asarray(v, float), (B,)) for v in state]))
+        hb = np.ascontiguousarray(np.broadcast_to(np.asarray(h, float), (B,)))
+        fb = np.ascontiguousarray(np.stack([np.broadcast_to(np.asarray(f, float), (B,)) for f in factors]))
+        drag = np.ascontiguousarray(np.broadcast_to(np.asarray(c[1], float), (B,)))
+        P, V = np.empty((nodes, 3, B)), np.empty((nodes, 3, B))
+        kernel(st, hb, fb, float(c[0]), drag, float(c[2]), float(c[3]), float(c[4]), nodes, substeps, P, V)
+        return P, V, tuple(st[k] for k in range(9))
+    P, V = np.empty((nodes, 3, B)), np.empty((nodes, 3, B))
+    for j in range(nodes):
+        P[j] = state[:3]
+        V[j] = state[3:6]
+        if j < nodes - 1:
+            for _ in range(substeps):
+                state = rk4_step(state, h, c, factors)
+    return P, V, state
+
+
+def _compile_path_kernel():
+    """The numba kernel of :func:`rk4_path` (None without numba); compiled on first use, cached on disk."""
+    try:
+        from numba import njit
+    except ImportError:  # numba is optional: the NumPy loop gives the same figures, slower
+        return None
+    import math
+
+    tiny = _TINY
+
+    @njit(cache=True, inline="always")
+    def accel(vx, vy, vz, wx, wy, wz, gravity, drag_k, magnus_k, s_half, radius):  # pragma: no cover (compiled)
+        v2 = vx * vx + vy * vy + vz * vz
+        cx = wy * vz - wz * vy
+        cy = wz * vx - wx * vz
+        cz = wx * vy - wy * vx
+        s = radius * math.sqrt(cx * cx + cy * cy + cz * cz) / (v2 + tiny)
+        m = magnus_k / (s + s_half + tiny)
+        d = -drag_k * math.sqrt(v2)
+        return d * vx + m * cx, d * vy + m * cy, d * vz + m * cz - gravity
+
+    @njit(cache=True)
+    def kernel(st, h, f, gravity, drag, magnus_k, s_half, radius, nodes, substeps, P, V):  # pragma: no cover
+        for b in range(st.shape[1]):
+            x, y, z, vx, vy, vz, wx, wy, wz = st[0, b], st[1, b], st[2, b], st[3, b], st[4, b], st[5, b], \
+                st[6, b], st[7, b], st[8, b]
+            hs, hh, h6 = h[b], 0.5 * h[b], h[b] / 6.0
+            hp = hs * h6
+            f2, f3, f4, fn = f[0, b], f[1, b], f[2, b], f[3, b]
+            dk = drag[b]
+            for j in range(nodes):
+                P[j, 0, b], P[j, 1, b], P[j, 2, b] = x, y, z
+                V[j, 0, b], V[j, 1, b], V[j, 2, b] = vx, vy, vz
+                if j == nodes - 1:
+                    break
+                for _ in range(substeps):
+                    ax1, ay1, az1 = accel(vx, vy, vz, wx, wy, wz, gravity, dk, magnus_k, s_half, radius)
+                    ax2, ay2, az2 = accel(vx + hh * ax1, vy + hh * ay1, vz + hh * az1, wx * f2, wy * f2, wz * f2,
+                                          gravity, dk, magnus_k, s_half, radius)
+                    ax3, ay3, az3 = accel(vx + hh * ax2, vy + hh * ay2, vz + hh * az2, wx * f3, wy * f3, wz * f3,
+                                          gravity, dk, magnus_k, s_half, radius)
+                    ax4, ay4, az4 = accel(vx + hs * ax3, vy + hs * ay3, vz + hs * az3, wx * f4, wy * f4, wz * f4,
+                                          gravity, dk, magnus_k, s_half, radius)
+                    x, y, z = (x + hs * vx + hp * (ax1 + ax2 + ax3), y + hs * vy + hp * (ay1 + ay2 + ay3),
+                               z + hs * vz + hp * (az1 + az2 + az3))
+                    vx, vy, vz = (vx + h6 * (ax1 + 2.0 * (ax2 + ax3) + ax4), vy + h6 * (ay1 + 2.0 * (ay2 + ay3) + ay4),
+                                  vz + h6 * (az1 + 2.0 * (az2 + az3) + az4))
+                    wx, wy, wz = wx * fn, wy * fn, wz * fn
+            st[0, b], st[1, b], st[2, b], st[3, b], st[4, b], st[5, b] = x, y, z, vx, vy, vz
+            st[6, b], st[7, b], st[8, b] = wx, wy, wz
+
+    return kernel
+
+
+_UNSET = object()
+_path_kernel = _UNSET  # numba is imported on the first flight integrated, not with this module
+
+
+def path_kernel():
+    """The compiled :func:`rk4_path` kernel, or None (no numba, or it could not compile: the NumPy loop runs)."""
+    global _path_kernel
+    if _path_kernel is _UNSET:
+        try:
+            _path_kernel = _compile_path_kernel()
+        except Exception:  # noqa: BLE001 — a broken numba install must not stop the library
+            _path_kernel = None
+    return _path_kernel
+
+
 def state_from_arrays(pos: np.ndarray, vel: np.ndarray, spin: np.ndarray) -> tuple:
     """(B, 3) arrays → 9-component state; a single ball (B = 1 or shape (3,)) becomes plain floats."""
     arr = np.concatenate([np.atleast_2d(np.asarray(a, dtype=float)) for a in (pos, vel, spin)], axis=1)

@@ -170,8 +170,9 @@ def points_in_polygon(pts: np.ndarray, poly: np.ndarray, tol: float = 1e-9) -> n
     # distance to each edge, for points on the boundary
     ex, ey = bx - ax, by - ay
     seg_len2 = np.maximum(ex**2 + ey**2, 1e-30)
-    s = np.clip(((x - ax) * ex + (y - ay) * ey) / seg_len2, 0.0, 1.0)
-    dist2 = (x - (ax + s * ex)) ** 2 + (y - (ay + s * ey)) ** 2
+    with np.errstate(over="ignore", invalid="ignore"):  # a point thousands of km away (a wild fit trial): not on an edge
+        s = np.clip(((x - ax) * ex + (y - ay) * ey) / seg_len2, 0.0, 1.0)
+        dist2 = (x - (ax + s * ex)) ** 2 + (y - (ay + s * ey)) ** 2
     on_edge = (dist2 <= tol**2).any(axis=1)
     return inside | on_edge
 

@@ -51,8 +51,10 @@ class JointConfig(ShootingConfig):
     trim_sigma: float = 4.0           # a free end stops where 3 frames in a row are off by more (σ units)
     rms_fail_factor: float = 4.0      # a flight with RMS above this × pixel_sigma is refitted or failed
     refit: bool = True                # try other contact hypotheses for flights that do not fit
-    max_refits: int = 8               # flights examined per rally
-    max_hypotheses: int = 16          # rally fits tried in all by the refits (each is a whole fit)
+    max_refits: int = 8               # rounds of refits per rally (each keeps at most one new plan)
+    max_hypotheses: int = 16          # hypotheses screened per failing flight and round (local fits: a few frames)
+    verify_hypotheses: int = 3        # the locally best hypotheses of a flight fitted over the whole rally
+    max_whole_refits: int = 24        # whole-rally fits the refits may spend in all
     sigma_inflation: float = 1.0      # extra covariance scale on top of the court YAML's `uncertainty`
     sigma_floor_m: float = 0.0        # extra isotropic m added to every frame's σ (the court's floor_m first)
     uncertainty: Uncertainty | None = None  # covariance calibration (None: the court YAML's `uncertainty`)
@@ -502,13 +504,71 @@ def unexplained(fit: ChainFit, span: tuple[int, int]) -> tuple[int, float]:
     return int(seen.sum() - passing.sum()), float(np.sum(pb.last_norm[passing] ** 2))
 
 
+def _window(fit: ChainFit, k: int) -> tuple[int, int]:
+    """The frames of the contacts around chain flight ``k``: from the contact before its start to the one after
+    its end (its neighbours' flights are in the window too: a contact moved or inserted there changes them)."""
+    ch = fit.problem.chain
+    f = ch.flights[k]
+    K = len(ch.contacts)
+    a = max(f.start - 1, 0)
+    b = min((f.end if f.end is not None else f.start) + 1, K - 1)
+    return int(ch.contacts[a].frame), int(ch.contacts[b].frame)
+
+
+def _local_plan(plan: Plan, window: tuple[int, int]) -> Plan | None:
+    """The contacts of ``plan`` inside ``window`` (frames), or None when fewer than two are."""
+    inside = [c for c in plan.contacts if window[0] <= c.prior.frame <= window[1]]
+    return Plan(inside, plan.notes) if len(inside) >= 2 else None
+
+
+def _local_score(obs, plan: Plan, window: tuple[int, int], cfg: JointConfig, model, hit_prior, warm
+                 ) -> tuple[int, float, int] | None:
+    """A plan fitted only between its contacts inside ``window`` (a few frames instead of the rally; the free
+    end only where the window holds the plan's first or last contact: a hypothesis for the flight before a
+    failing run-out is judged with that run-out): ``(2D points left unexplained, squared residuals, failing
+    flights)`` there, or None when it cannot be fitted locally."""
+    sub = _local_plan(plan, window)
+    if sub is None:
+        return None
+    first = sub.contacts[0] is plan.contacts[0]
+    last = sub.contacts[-1] is plan.contacts[-1]
+    span = (0 if first else sub.contacts[0].prior.frame, obs.n_frames - 1 if last else sub.contacts[-1].prior.frame)
+    fit = _fit_with_ends(obs, sub, replace(cfg, free_ends=cfg.free_ends and (first or last)), model, hit_prior,
+                         warm=warm, span=span)
+    if isinstance(fit, str):
+        return None
+    n, cost = unexplained(fit, window)
+    return n, cost, _n_failing(fit)
+
+
+def _improves(n: int, cost: float, failing: int, base: tuple[int, float, int], tol: int) -> bool:
+    """Whether a hypothesis leaving ``n`` 2D points unexplained with squared residuals ``cost`` and ``failing``
+    failing flights beats ``base``: it explains clearly more, or about as much and fits it better — by half, or
+    at all when fewer flights fail (the run-out included: a hit at the floor fails the run-out, not the flight
+    before it)."""
+    better = cost < 0.5 * base[1] or (cost < base[1] and failing < base[2])
+    return n < base[0] - tol or (n <= base[0] + tol and better)
+
+
+def _tolerance(obs, span: tuple[int, int]) -> int:
+    """2D points two hypotheses may differ by in what they leave unexplained and still count as equal."""
+    return max(UNEXPLAINED_TOLERANCE, int(0.1 * np.isfinite(obs.uv[span[0]:span[1] + 1]).all(axis=1).sum()))
+
+
 def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -> ChainFit:
     """Try other contact hypotheses for each flight that does not fit; keep the best that explains the track;
-    then refit with the frames of what still fails muted, so it does not pull its neighbours."""
+    then refit with the frames of what still fails muted, so it does not pull its neighbours.
+
+    Each hypothesis is first fitted locally — only the contacts from the one before the flight to the one after
+    it, without free ends — and compared there with the current plan fitted the same way; the locally best
+    ones (at most ``cfg.verify_hypotheses``) are then fitted over the whole rally and kept by the same test on
+    the whole track. A rally with many missed contacts (a broadcast's glass rebounds and volleys) so gets
+    ``cfg.max_hypotheses`` tries per failing flight at the price of a few whole fits."""
     tried: set[tuple] = {fit.plan.key()}
     # one yardstick for every hypothesis: the track between the first and the last event (the free ends beyond
     # are what the track alone pins; a hypothesis that explains them differently is no better for it)
     span = (int(obs.event_frames[0]), int(obs.event_frames[-1]))
+    whole_fits = 0
     for _ in range(cfg.max_refits):
         # hypotheses only for flights between two contacts: a free end that does not fit is muted below
         bad = _bad_flights(fit)
@@ -516,24 +576,39 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
             break
         improved = False
         current = unexplained(fit, span)
-        tol = max(UNEXPLAINED_TOLERANCE, int(0.1 * np.isfinite(obs.uv[span[0]:span[1] + 1]).all(axis=1).sum()))
+        tol = _tolerance(obs, span)
+        warm = _remember(fit.problem.chain, fit.sol.theta)
         for k in bad:
-            kept = []
+            window = _window(fit, k)
+            base = _local_score(obs, fit.plan, window, cfg, model, hit_prior, warm)
+            local_tol = _tolerance(obs, window)
+            screened, n_tried = [], 0
             for plan in hypotheses(obs, fit, k, cfg):
                 if plan.key() in tried:
                     continue
-                if len(tried) > cfg.max_hypotheses:
+                if n_tried >= cfg.max_hypotheses:
                     break
                 tried.add(plan.key())
-                cand = _fit_with_ends(obs, plan, cfg, model, hit_prior,
-                                      warm=_remember(fit.problem.chain, fit.sol.theta))
+                n_tried += 1
+                loc = _local_score(obs, plan, window, cfg, model, hit_prior, warm) if base is not None else None
+                if loc is None:  # no local comparison possible: the whole fit decides
+                    screened.append(((-1, 0.0, 0), plan))
+                elif _improves(*loc, base, local_tol):
+                    screened.append((loc, plan))
+                else:  # locally no better: verified only when nothing better is left (the whole track decides)
+                    screened.append(((loc[0] + 10**6, *loc[1:]), plan))
+            # those explaining clearly more of the window first, then the best fitted
+            screened.sort(key=lambda s: (s[0][0] // max(local_tol, 1), s[0][1]))
+            kept = []
+            for _loc, plan in screened[:cfg.verify_hypotheses]:
+                if whole_fits >= cfg.max_whole_refits:
+                    break
+                whole_fits += 1
+                cand = _fit_with_ends(obs, plan, cfg, model, hit_prior, warm=warm)
                 if isinstance(cand, str):
                     continue
                 n, cost = unexplained(cand, span)
-                # as much explained, and fitted better: by half, or at all when fewer flights fail (the run-out
-                # included: a hit at the floor fails the run-out, not the flight before it)
-                better = cost < 0.5 * current[1] or (cost < current[1] and _n_failing(cand) < _n_failing(fit))
-                if n < current[0] - tol or (n <= current[0] + tol and better):
+                if _improves(n, cost, _n_failing(cand), (*current, _n_failing(fit)), tol):
                     kept.append((n, cost, cand))
             if kept:  # of those explaining about as much of the track as the best, the one that fits it best
                 least = min(n for n, _, _ in kept)

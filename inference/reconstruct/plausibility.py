@@ -460,9 +460,10 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
     gaps = [fr for fr in _gap_frames(obs, chk.first, chk.last) if fr not in kinks]
     for frame in kinks:
         if frame not in floor_hit_bounces:
-            plan = inserted(frame, label, "a surface")
-            if plan is not None:
-                yield plan
+            for lab in _surfaces_seen(obs, frame, label):
+                plan = inserted(frame, lab, "a surface")
+                if plan is not None:
+                    yield plan
     # 2. another surface or event class at its contacts
     for c in ends:
         pc = contacts[c]
@@ -476,9 +477,10 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
                             (old.frame, note))
     # 3. a missed bounce in a gap of the track (one the tracker lost, or out of the picture: bridged)
     for frame in gaps:
-        plan = inserted(frame, label, "a surface")
-        if plan is not None:
-            yield plan
+        for lab in _surfaces_seen(obs, frame, label):
+            plan = inserted(frame, lab, "a surface")
+            if plan is not None:
+                yield plan
     # 4. a missed racket hit: a volley or a hit the tracker lost (a serve in the gap after its toss), by the
     #    player on the side of the net where the fit has the ball first, then by the other
     for frame in dict.fromkeys(kinks[:1] + turn_frames(obs.uv, chk.first, chk.last) + gaps[:1]):
@@ -503,6 +505,21 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
             old = contacts[c].prior
             note = f"event {old.label} at frame {old.frame} fitted as no contact ({why})"
             yield plan_with(contacts[:c] + contacts[c + 1:], (old.frame, note))
+
+
+def _surfaces_seen(obs: Observations, frame: int, label: str) -> list[str]:
+    """Surface labels for a contact inserted at ``frame``: ``label`` (the floor-and-walls group: the line of sight
+    picks the surface), then any other surface the line of sight meets inside its extent — the near glass or a
+    mesh, which a camera behind the near glass sees the ball through (a rebound off the glass it looks through
+    lies on the same line of sight as a bounce on the floor beyond it)."""
+    out = [label]
+    grouped = set(obs.court.event_groups.get(label, (label,)))
+    for lab in obs.court.event_labels:
+        if lab in grouped or lab in PLAYER_EVENTS or lab == "net":
+            continue
+        if contact_prior(obs, frame, lab, unbounded_ok=False).ok:
+            out.append(lab)
+    return out
 
 
 def _other_labels(obs: Observations, prior) -> list[str]:

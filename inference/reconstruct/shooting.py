@@ -34,7 +34,7 @@ import numpy as np
 from scipy import sparse
 
 from inference.court import Court, Material, Plane
-from inference.physics import FlightModel, bounce, rk4_step, spin_factors
+from inference.physics import FlightModel, bounce, rk4_path, rk4_step, spin_factors
 
 from .observations import ContactPrior, Observations
 
@@ -355,14 +355,7 @@ def integrate(inputs: np.ndarray, F0: np.ndarray, direction: np.ndarray, L: int,
     h = sgn * k / (fps * substeps)
     factors = spin_factors(h, c[5])
     nodes = -(-(L - 1) // k) + 1                                        # steps cover frames 0 … L − 1
-    P = np.empty((nodes, 3, len(inp)))
-    Vv = np.empty((nodes, 3, len(inp)))
-    for j in range(nodes):
-        P[j] = state[:3]
-        Vv[j] = state[3:6]
-        if j < nodes - 1:
-            for _ in range(substeps):
-                state = rk4_step(state, h, c, factors)
+    P, Vv, _ = rk4_path(state, h, c, factors, nodes, substeps)
     if k > 1:                                                           # frames between the steps
         Pf, Vf = np.empty((L, 3, len(inp))), np.empty((L, 3, len(inp)))
         m = len(range(0, L, k))
@@ -965,7 +958,8 @@ class Problem:
                 idx = [ct.tau, *ct.coords, *f_in.vel, *(f_in.spin or []), *([f_in.drag] if f_in.drag is not None else [])]
                 back[idx] = theta0[idx]
             cands.append(self._rebound_runouts(back, flagged))
-        costs = [float(np.sum(self.assemble(t, jac=False)[0].residuals() ** 2)) for t in (theta, *cands)]
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild candidate's cost is inf: never the best
+            costs = [float(np.sum(self.assemble(t, jac=False)[0].residuals() ** 2)) for t in (theta, *cands)]
         best = int(np.argmin(costs))
         return cands[best - 1] if best else None
 
@@ -1169,7 +1163,8 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
     rows, aux = problem.assemble(theta, fl=flights)
     r, J = rows.result()
     norm = problem.last_norm
-    cost = float(r @ r)
+    with np.errstate(over="ignore"):  # a wild start (a hypothesis far off) costs inf: every trial improves on it
+        cost = float(r @ r)
     lam = LM_LAMBDA0
     it = 0
     rel = 1.0

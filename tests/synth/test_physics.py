@@ -340,3 +340,32 @@ def test_lowered_launch_goes_into_the_net(padel):
     fl = simulate_flight(padel, p0, low.vel, spin, 0.0, 2.0)
     assert fl.contacts[0].event == "net"
     assert fl.contacts[0].position[2] == pytest.approx(0.5, abs=0.02)
+
+
+def test_the_compiled_flight_path_is_the_step_by_step_one(monkeypatch):
+    """``rk4_path`` (the 3D fit's integrator, compiled with numba when installed) gives the positions and velocities
+    of :func:`rk4_step` repeated, bit for bit, forwards and backwards, with one drag per ball; without numba the
+    NumPy loop runs."""
+    import inference.physics as ph
+
+    rng = np.random.default_rng(4)
+    B = 40
+    state = tuple(rng.normal(size=B) * s for s in (3, 3, 1, 10, 10, 3, 30, 30, 30))
+    h = np.where(rng.random(B) > 0.5, 1.0, -1.0) / 200.0
+    c = list(ph.FlightModel.from_ball(load_court("padel").ball).kernel())
+    c[1] = c[1] * (1 + 0.2 * rng.random(B))
+    f = ph.spin_factors(h, c[5])
+    P, V, last = ph.rk4_path(state, h, c, f, 25, 3)
+    s = state
+    for j in range(25):
+        np.testing.assert_array_equal(P[j], np.stack(s[:3]))
+        np.testing.assert_array_equal(V[j], np.stack(s[3:6]))
+        if j < 24:
+            for _ in range(3):
+                s = ph.rk4_step(s, h, c, f)
+    np.testing.assert_array_equal(np.stack(last), np.stack(s))
+    assert ph.path_kernel() is not None, "numba is a dependency (pyproject.toml): the compiled kernel should load"
+    monkeypatch.setattr(ph, "_path_kernel", None)   # no numba
+    P2, V2, _ = ph.rk4_path(state, h, c, f, 25, 3)
+    np.testing.assert_array_equal(P2, P)
+    np.testing.assert_array_equal(V2, V)
