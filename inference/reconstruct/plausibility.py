@@ -432,10 +432,13 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
         prior = contact_prior(obs, frame, label)
         if label not in PLAYER_EVENTS and prior.plane is None:
             return None
+        pos = sum(c.prior.frame < frame for c in contacts)
+        if pos and pos < len(contacts) and second_bounce(obs.court, contacts[pos - 1].prior, prior,
+                                                         contacts[pos].prior):
+            return None
         where = prior.plane.name if prior.plane is not None else what
         note = f"contact inserted at frame {frame} ({where}): the flight over frames {chk.first}–{chk.last} did " \
                f"not fit as one ({why})"
-        pos = sum(c.prior.frame < frame for c in contacts)
         return plan_with(contacts[:pos] + [PlanContact(prior, None, note)] + contacts[pos:], (frame, note))
 
     ends = [f.start] + ([f.end] if f.end is not None else [])
@@ -505,6 +508,19 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
             old = contacts[c].prior
             note = f"event {old.label} at frame {old.frame} fitted as no contact ({why})"
             yield plan_with(contacts[:c] + contacts[c + 1:], (old.frame, note))
+
+
+def second_bounce(court: Court, before, prior, after) -> bool:
+    """Whether a floor contact ``prior`` inserted between the contacts ``before`` and ``after`` (their priors) is a
+    second bounce that the play rules out: the one before it a floor bounce in the same half, the one after it a
+    racket hit (the point is over after two bounces; a glass or the fence the camera looks through, on the same
+    line of sight, is the contact then)."""
+    def on_floor(p) -> bool:
+        return p.plane is not None and p.plane.event == "ground" and p.ok
+
+    if not (on_floor(prior) and on_floor(before) and after.label in PLAYER_EVENTS):
+        return False
+    return (float(before.point[1]) < court.net_y) == (float(prior.point[1]) < court.net_y)
 
 
 def _surfaces_seen(obs: Observations, frame: int, label: str) -> list[str]:
