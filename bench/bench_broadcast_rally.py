@@ -16,7 +16,8 @@ verdict; written flights over the RMS limit; frames below the floor; 3D MAE / Me
 over the frames both have; CPU seconds of the pipeline.
 
 With ``--keep`` the clips and the results stay; a second run reuses the clips and the pipeline's cached stages
-(only what changed runs again: a new 3D solver re-runs the reconstruct stage alone). ``--tennis`` runs the same
+(stages whose inputs did not change are skipped: remove the ``*_out`` folders to measure new code on the same
+clips). ``--tennis`` runs the same
 on tennis tour broadcasts (``tennis_tv``, 50 fps) instead.
 """
 from __future__ import annotations
@@ -65,10 +66,10 @@ def render(sport: str, seed: int, frames: int, work: Path, log: Path) -> Clip:
     """The simulated broadcast clip of ``seed`` under ``work`` (rendered once, reused)."""
     data = work / f"{sport}_{seed}"
     if not (data / "manifest.yaml").is_file():
-        camera, fps = ("padel_tv", "25") if sport == "padel" else ("tennis_tv", "50")
-        run(["synth", "--sport", sport, "--clips", "1", "--out", str(data), "--seed", str(seed), "--camera", camera,
-             "--size", "1920x1080", "--fps", fps, "--max-frames", str(frames), "--codec", "mp4v", "--click-noise",
-             "1.5", "--mid-rally", *(["--venue", "tour"] if sport == "padel" else [])], log)
+        c = synth_config(sport, frames)   # the same clip as long_seeds simulated
+        run(["synth", "--sport", sport, "--clips", "1", "--out", str(data), "--seed", str(seed), "--camera", c.camera,
+             "--size", f"{c.width}x{c.height}", "--fps", f"{c.fps:g}", "--max-frames", str(frames), "--codec", c.codec,
+             "--click-noise", f"{c.click_noise_px:g}", "--mid-rally", "--venue", c.venue], log)
     return Clip(next(p for p in sorted(data.iterdir()) if p.is_dir()))
 
 
