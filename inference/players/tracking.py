@@ -48,6 +48,9 @@ class TrackingConfig:
     distance_weight: float = 0.3      # selection score = seconds on court + weight × metres travelled
     ankle_height: float = ANKLE_HEIGHT
     min_kp_score: float = 0.3
+    extend_iou: float = 0.3           # a player's track carried past its ends onto detections overlapping it this much
+    extend_s: float = 0.5             # ... for at most this long beyond each end ...
+    extend_miss: int = 1              # ... across at most this many looks in a row with no such detection
 
 
 @dataclass
@@ -251,6 +254,61 @@ def select_players(tracks: list[Track], court: Court, fps: float, cfg: TrackingC
     return chosen
 
 
+def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """IoU of one box ``a (4,)`` with boxes ``b (N, 4)`` (``x1, y1, x2, y2``) → (N,)."""
+    b = np.asarray(b, float).reshape(-1, 4)
+    w = np.clip(np.minimum(a[2], b[:, 2]) - np.maximum(a[0], b[:, 0]), 0, None)
+    h = np.clip(np.minimum(a[3], b[:, 3]) - np.maximum(a[1], b[:, 1]), 0, None)
+    inter = w * h
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]) - inter
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(union > 0, inter / union, 0.0)
+
+
+def extend_ends(players: list[Track], seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingConfig
+                ) -> list[Track]:
+    """Each chosen player's track carried past its ends onto the looks the tracker left out: the first looks
+    before a tracker confirms a track, and a player leaving the picture (running wide past its edge, the feet
+    out of it or under a score box: a weak, cut-off detection the tracker no longer takes). A detection
+    continues a track when its box overlaps the track's box at that end by ≥ ``extend_iou`` (no other player's
+    box more), for at most ``extend_s`` and across at most ``extend_miss`` looks in a row without one; the court
+    position comes from its keypoints (NaN when the feet are out of the picture)."""
+    looked = np.flatnonzero(seq.looked) if seq.looked is not None else np.arange(len(seq))
+    reach = cfg.extend_s * fps
+    out = [t for t in players]
+    for k in range(len(out)):
+        for forward in (False, True):
+            t = out[k]
+            end = t.frames[-1] if forward else t.frames[0]
+            box = t.boxes[-1] if forward else t.boxes[0]
+            steps = looked[looked > end] if forward else looked[looked < end][::-1]
+            rows, misses = [], 0
+            for f in steps[np.abs(steps - end) <= reach].tolist():
+                p = seq.frames[f]
+                ok = (p.scores >= cfg.min_person_score) & np.isfinite(p.boxes).all(axis=1)
+                iou = np.where(ok, box_iou(box, p.boxes), 0.0)
+                for j, other in enumerate(out):  # a detection another player's track holds there is theirs
+                    if j != k and np.isin(f, other.frames):
+                        taken = box_iou(other.boxes[np.searchsorted(other.frames, f)], p.boxes) > 0.5
+                        iou = np.where(taken, 0.0, iou)
+                i = int(np.argmax(iou)) if len(iou) else -1
+                if i < 0 or iou[i] < cfg.extend_iou:
+                    misses += 1
+                    if misses > cfg.extend_miss:
+                        break
+                    continue
+                misses = 0
+                box = p.boxes[i]
+                court = court_positions(p.keypoints[i:i + 1], p.kp_scores[i:i + 1], camera, cfg.ankle_height,
+                                        cfg.min_kp_score)[0]
+                rows.append((f, p.boxes[i], p.keypoints[i], p.kp_scores[i], p.scores[i], court))
+            if rows:
+                rows = rows if forward else rows[::-1]
+                more = Track(*(np.array([r[c] for r in rows]) for c in range(6)))
+                out[k] = t.concat(more) if forward else more.concat(t)
+    return out
+
+
 def interpolate(t: Track, fps: float, cfg: TrackingConfig) -> Track:
     """Fill gaps of at most ``max_gap_s`` by linear interpolation of every per-frame array."""
     max_gap = int(round(cfg.max_gap_s * fps))
@@ -319,7 +377,8 @@ def to_player_tracks(players: list[Track], court: Court, image_size: tuple[int, 
 def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: float,
                        config: TrackingConfig | None = None,
                        active: np.ndarray | None = None) -> PlayerTracks:
-    """The whole pipeline: track → stitch → select per side → interpolate gaps → players.csv table.
+    """The whole pipeline: track → stitch → select per side → extend the ends (:func:`extend_ends`) → interpolate
+    gaps → players.csv table.
 
     ``active`` (N,) bool: the frames to use (court-view scenes, :mod:`inference.video.scenes`); the poses of the other
     frames are ignored and no row is written there — no gap is filled and no position smoothed across them.
@@ -330,7 +389,8 @@ def players_from_poses(seq: PoseSequence, camera: Camera, court: Court, fps: flo
         seq = only_frames(seq, active)
     tracks = track_people(seq, camera, fps, cfg)
     tracks = stitch(tracks, fps, cfg)
-    players = [interpolate(t, fps, cfg) for t in select_players(tracks, court, fps, cfg)]
+    players = [interpolate(t, fps, cfg) for t in extend_ends(select_players(tracks, court, fps, cfg), seq, camera, fps,
+                                                             cfg)]
     if active is None:
         players = [smooth_court(t, fps, cfg) for t in players]
     else:

@@ -195,3 +195,51 @@ def test_movenet_input_size_grows_with_the_frame():
         assert np.nanmean(np.linalg.norm(persons.keypoints - g[None], axis=2), axis=1).min() < 25.0
     backend.infer(frame)
     assert max(backend._shape) == 640
+
+
+def _persons(cam, spots, scores):
+    """Persons standing at court ``spots`` [(x, y), ...] with person ``scores``; boxes from their keypoints."""
+    kps = np.stack([person_at(cam, x, y) for x, y in spots]) if spots else np.zeros((0, 17, 2))
+    return Persons(np.full((len(spots), 4), np.nan), kps, np.where(np.isfinite(kps).all(axis=2), 0.9, 0.0),
+                   np.asarray(scores, float))
+
+
+def test_a_chosen_players_track_is_carried_onto_the_weak_detections_at_its_ends(cam):
+    """The tracker confirms a track a look late and drops a player whose detection turns weak (running out of
+    the picture, under a score box): the chosen players' tracks are carried onto detections overlapping their end
+    box — not onto a detection another player holds, nor onto one that does not overlap."""
+    from inference.players.tracking import Track, TrackingConfig, extend_ends
+
+    court = load_court("padel")
+    n = 24
+    walk = {f: (3.0 + 0.05 * f, 4.0) for f in range(15)}       # a near player walking slowly along the net, gone
+    frames = []                                                  # after frame 14 (out of the picture)
+    for f in range(n):
+        spots, sc = [], []
+        if f in walk:
+            spots.append(walk[f]); sc.append(0.8 if 4 <= f <= 12 else 0.12)  # weak before 4 and after 12
+        if f >= 16:   # his team-mate steps where he was: tracked, and his own
+            spots.append((3.75, 4.05)); sc.append(0.9)
+        spots.append((8.5, 15.0)); sc.append(0.9)                # someone far away
+        frames.append(_persons(cam, spots, sc))
+    looked = np.zeros(n, bool)
+    looked[::2] = True
+    seq = PoseSequence(frames, "test", looked)
+
+    def track(fs, k):
+        p = [frames[f] for f in fs]
+        return Track(np.array(fs), np.stack([q.boxes[k] for q in p]), np.stack([q.keypoints[k] for q in p]),
+                     np.stack([q.kp_scores[k] for q in p]), np.array([q.scores[k] for q in p]),
+                     court_positions(np.stack([q.keypoints[k] for q in p]), np.stack([q.kp_scores[k] for q in p]), cam))
+
+    mate = track(list(range(16, n, 2)), 0)
+    chosen = track([4, 6, 8, 10, 12], 0)
+    out = extend_ends([chosen, mate], seq, cam, 25.0, TrackingConfig(extend_s=0.5))
+    # carried back to frame 0 and on to frame 14; frame 16's detection on his spot is the team-mate's
+    assert out[0].frames.tolist() == [0, 2, 4, 6, 8, 10, 12, 14], out[0].frames
+    np.testing.assert_allclose(out[0].court[0], walk[0], atol=0.05)
+    assert out[1].frames.tolist() == mate.frames.tolist()      # nobody overlaps the team-mate before frame 16
+    # without the team-mate's track the detection on the spot would be taken: the test above is not vacuous
+    assert 16 in extend_ends([chosen], seq, cam, 25.0, TrackingConfig(extend_s=0.5))[0].frames.tolist()
+    # the far person never overlaps the near player: no continuation there
+    assert not (np.isin(out[0].frames, [0, 2, 14]) & (out[0].court[:, 1] > 10)).any()
