@@ -123,6 +123,8 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=300, help="frames per generated clip at most")
     ap.add_argument("--sports", default="padel,tennis")
     ap.add_argument("--data", type=Path, default=Path("runs/bench_pose_stride"))
+    ap.add_argument("--extend", default="", help="comma-separated TrackingConfig.extend_s values to compare, e.g. "
+                    "0,0.5 (0: the tracks' ends are not carried onto weak detections); default: the default only")
     ap.add_argument("--crops", default="", help="comma-separated strides that also get a row with tile looks "
                     "(the default clip loop, run for real)")
     args = ap.parse_args()
@@ -148,9 +150,10 @@ def main() -> int:
         none = EventCounts(classes)
         for clip, _, _ in cache:
             event_counts(det, clip, None, none)
-        rows = [(stride, False) for stride in strides]
-        rows += [(int(x), True) for x in args.crops.split(",") if x]
-        for stride, tiles in rows:
+        extends = [float(x) for x in args.extend.split(",") if x] or [TrackingConfig().extend_s]
+        rows = [(stride, False, e) for stride in strides for e in extends]
+        rows += [(int(x), True, e) for x in args.crops.split(",") if x for e in extends]
+        for stride, tiles, extend in rows:
             errs, p90, switches, cover, wrist, cpu_s, video_s = [], [], 0, [], [], 0.0, 0.0
             counts = EventCounts(classes)
             kinds = {"full": 0, "tiles": 0}
@@ -165,7 +168,7 @@ def main() -> int:
                     cpu_s += float(cpu[look].sum())
                 gt = clip.read_players(gt=True)
                 pred = players_from_poses(kept, clip.read_camera(gt=True), load_court(clip.court_path()),
-                                          clip.info.fps, TrackingConfig())
+                                          clip.info.fps, TrackingConfig(extend_s=extend))
                 s = score(pred, gt, clip.info.fps)
                 errs.append(s.median_error_m)
                 p90.append(s.p90_error_m)
@@ -177,6 +180,8 @@ def main() -> int:
                 event_counts(det, clip, pred, counts)
             fps = clips[0].info.fps
             name = f"{stride} + tiles ({kinds['tiles']} of {sum(kinds.values())} looks)" if tiles else f"{stride}"
+            if len(extends) > 1:
+                name += f", ends carried {extend:g} s"
             print(f"| {sport} | {name} | {fps / stride:.1f} | {cpu_s / video_s:.2f} | {np.mean(errs):.3f} / "
                   f"{np.mean(p90):.3f} | {switches} | {np.mean(cover) * 100:.0f}% | {np.nanmean(wrist):.1f} | "
                   f"{counts.scores()['f1']:.3f} ({none.scores()['f1']:.3f}) |", flush=True)
