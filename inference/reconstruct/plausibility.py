@@ -436,6 +436,8 @@ def hypotheses(obs: Observations, fit: ChainFit, k: int, cfg: JointConfig):
         if pos and pos < len(contacts) and second_bounce(obs.court, contacts[pos - 1].prior, prior,
                                                          contacts[pos].prior):
             return None
+        if label in PLAYER_EVENTS and breaks_alternation([c.prior.label for c in contacts], pos, label):
+            return None
         where = prior.plane.name if prior.plane is not None else what
         note = f"contact inserted at frame {frame} ({where}): the flight over frames {chk.first}–{chk.last} did " \
                f"not fit as one ({why})"
@@ -521,6 +523,15 @@ def second_bounce(court: Court, before, prior, after) -> bool:
     if not (on_floor(prior) and on_floor(before) and after.label in PLAYER_EVENTS):
         return False
     return (float(before.point[1]) < court.net_y) == (float(prior.point[1]) < court.net_y)
+
+
+def breaks_alternation(labels: list[str], pos: int, hit: str) -> bool:
+    """Whether a racket hit ``hit`` inserted at position ``pos`` of the contacts ``labels`` would follow or precede a
+    hit by the same side: the sides hit in turn, so a hit the events missed lies between two hits of one side (or
+    before the first, after the last, of the other side), never between a near and a far hit."""
+    before = next((lab for lab in reversed(labels[:pos]) if lab in PLAYER_EVENTS), None)
+    after = next((lab for lab in labels[pos:] if lab in PLAYER_EVENTS), None)
+    return hit in (before, after)
 
 
 def _surfaces_seen(obs: Observations, frame: int, label: str) -> list[str]:

@@ -288,3 +288,19 @@ def test_a_floor_bounce_after_a_floor_bounce_before_a_racket_hit_is_no_hypothesi
     assert not second_bounce(court, bounce(near), bounce(far), hit)                      # the other half
     assert not second_bounce(court, bounce(near), bounce(0.0, glass, 1.2), hit)         # the near glass
     assert not second_bounce(court, bounce(near), bounce(near + 1.0), bounce(near + 2.0))  # no hit after
+
+
+def test_an_inserted_racket_hit_keeps_the_sides_in_turn():
+    """``breaks_alternation``: the sides hit in turn, so a missed racket hit lies between two hits of one side
+    (it is the other side's), before the first or after the last hit of the other side — never beside a hit
+    of its own side. Bounces between the hits do not count."""
+    from inference.reconstruct.plausibility import breaks_alternation
+
+    labels = ["player_near", "ground", "player_far", "ground", "player_far"]
+    assert not breaks_alternation(labels, 4, "player_near")   # between the two far hits: the missed near hit
+    assert breaks_alternation(labels, 4, "player_far")        # a third far hit in a row
+    assert breaks_alternation(labels, 2, "player_near")       # right after the near hit (bounce between)
+    assert breaks_alternation(labels, 2, "player_far")        # right before the far hit
+    assert not breaks_alternation(labels, 0, "player_far")    # before the first hit, the other side
+    assert breaks_alternation(labels, 5, "player_far")        # after the last far hit
+    assert not breaks_alternation(["ground", "wall"], 1, "player_near")  # no hits at all
