@@ -4,7 +4,7 @@ Runs the whole pipeline (camera, detect, smooth, events, players with MoveNet, r
 output folder, prints the per-stage table with the slowest stage named, and the scores against the sample's
 ground truth. With ``--device cuda`` it measures the GPU (where one is lent).
 
-    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1] [--detector-backend auto|torch|onnx] [--pose-every N]
+    .venv/bin/python bench/bench_pipeline.py [--device cpu] [--pose movenet|none] [--batch-size 1] [--detector-backend auto|torch|onnx|onnx-int8] [--pose-every N]
     .venv/bin/python bench/bench_pipeline.py --input VIDEO.mp4 --court tennis --court-points auto   # any video
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ def main() -> int:
     ap.add_argument("--pose", default="movenet")
     ap.add_argument("--batch-size", type=int, default=1)
     ap.add_argument("--pose-every", type=int, default=0, help="pose every N-th frame (0: auto, as rally3d infer)")
-    ap.add_argument("--detector-backend", default="auto", choices=["auto", "torch", "onnx"])
+    ap.add_argument("--detector-backend", default="auto", choices=["auto", "torch", "onnx", "onnx-int8"])
     ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_pipeline")
     ap.add_argument("--input", type=Path, default=SAMPLE, help="a video or clip folder (default: the padel sample)")
     ap.add_argument("--court", default=None, help="with a video: its court (padel, tennis)")

@@ -11,7 +11,7 @@ synthetic clips. Prints Markdown and writes JSON.
 - **Detector**: the shipped WASB padel weights on padel clips made with seed ``--seed`` (the weights were trained
   on seed 10; the embedded sample is seed 7), one folder per size, randomised camera and look, H.264. Variants:
   eager PyTorch as trained (batch norms unfolded), with batch norms folded, with crop-tracking, ONNX Runtime,
-  ONNX Runtime with crop-tracking. CPU seconds are the whole ``rally3d detect`` work (decode, letterbox,
+  ONNX Runtime with crop-tracking, and the weights' int8 companion (``wasb_padel.int8.onnx``) with crop-tracking. CPU seconds are the whole ``rally3d detect`` work (decode, letterbox,
   network, tracker) measured with ``time.process_time``; ``--threads`` threads for PyTorch and ONNX Runtime
   alike (1 by default: CPU time then does not pay for threads spinning on a busy machine). F1 at τ = 4 px in
   original pixels, pooled over the clips; "decode + letterbox" is the floor no detector variant goes below.
@@ -39,6 +39,7 @@ VARIANTS = {  # name → BallDetectorRunner options
     "eager + BN fold + crop": {"crop": "auto"},
     "ONNX": {"backend": "onnx"},
     "ONNX + crop": {"backend": "onnx", "crop": "auto"},
+    "ONNX int8 + crop": {"backend": "onnx-int8", "crop": "auto"},
 }
 
 

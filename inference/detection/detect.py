@@ -103,10 +103,14 @@ class BallDetectorRunner:
         step: window step in frames (``frames_in``: non-overlapping; 1: pooled overlapping windows).
         batch_size: windows per forward pass (full-frame windows; crop-tracking runs one at a time).
         backend: ``torch`` (eager PyTorch: the library's default, what training's evaluation compares against),
-            ``onnx`` (ONNX Runtime, CPU; exported and cached on first use, :mod:`.engine`) or ``auto`` (ONNX Runtime
-            on the CPU where installed, else eager PyTorch: the default of ``rally3d infer`` and ``rally3d detect``).
+            ``onnx`` (ONNX Runtime, CPU; exported and cached on first use, :mod:`.engine`), ``onnx-int8`` (the
+            weights' int8 companion, :mod:`.quantize`) or ``auto`` (ONNX Runtime on the CPU where installed — the
+            int8 companion when the weights have one —, else eager PyTorch: the default of ``rally3d infer`` and
+            ``rally3d detect``).
         crop: :class:`~.crop.CropConfig` for crop-tracking, ``None`` for the full frame everywhere.
         fold_bn: fold batch norms into the convolutions (an inference copy of ``model``).
+        int8: the weights' int8 companion (:func:`~.quantize.int8_companion`; :meth:`from_weights` finds it), run
+            by ``auto`` and ``onnx-int8`` on the CPU.
     """
 
     model: torch.nn.Module
@@ -122,6 +126,7 @@ class BallDetectorRunner:
     crop: CropConfig | None = None
     fold_bn: bool = True
     onnx_dir: Path | None = None
+    int8: Path | None = None
 
     def __post_init__(self) -> None:
         # batch-norm folded into the convolutions and channels-last memory: ~1.3x and ~1.2-2x faster for these
@@ -130,7 +135,7 @@ class BallDetectorRunner:
             self.model, _ = fold_batchnorm(self.model)
         else:
             self.model = copy.deepcopy(self.model).eval()
-        self.engine = make_engine(self.model, self.backend, self.frames_in, self.device, self.onnx_dir)
+        self.engine = make_engine(self.model, self.backend, self.frames_in, self.device, self.onnx_dir, self.int8)
 
     @classmethod
     def from_weights(cls, name: str | None = "wasb", weights: str | Path | None = None, *, trust: bool = False,
@@ -145,6 +150,10 @@ class BallDetectorRunner:
             raise FileNotFoundError(f"no shipped weights for {name!r}; pass the path of a checkpoint "
                                     "(weights are never downloaded)")
         model, spec, _ = load_detector(weights, name, trust=trust)
+        if "int8" not in kw and kw.get("backend", "torch") in ("auto", "onnx-int8"):
+            from .quantize import int8_companion
+
+            kw["int8"] = int8_companion(weights)
         if name and spec.arch != name:
             log.info("%s holds a %s detector (stored in the file), not %s: using %s", weights, spec.arch, name, spec.arch)
         return cls(model, frames_in=spec.frames_in, net_size=spec.input_size, normalize=spec.normalize, **kw)

@@ -1,4 +1,4 @@
-"""What runs the detector network: eager PyTorch or ONNX Runtime on the CPU, behind one call.
+"""What runs the detector network: eager PyTorch, or ONNX Runtime on the CPU (float or int8), behind one call.
 
 An engine maps a normalised batch ``x (B, 3·F, H, W) float32`` to probabilities ``(B, F_out, H, W) float32``
 (the sigmoid of the logits). Both take any ``H, W`` that are multiples of 8 (the networks are fully
@@ -6,7 +6,8 @@ convolutional), so the crop-tracking windows run through the same engine as full
 
 The ONNX file is exported from the (batch-norm folded) PyTorch model on first use and cached under
 ``$RALLY3D_CACHE/onnx`` (default ``~/.cache/rally3d/onnx``), named by a hash of the weights, so a changed
-checkpoint is exported again; nothing is ever downloaded.
+checkpoint is exported again; nothing is ever downloaded. A checkpoint's int8 companion (``NAME.int8.onnx``
+beside it, :mod:`.quantize`) runs instead where ``auto`` finds one made from those exact weights.
 
 Example:
     >>> engine = make_engine(model, backend="onnx", frames_in=3)
@@ -26,7 +27,7 @@ from torch import nn
 
 log = logging.getLogger(__name__)
 
-BACKENDS = ("auto", "torch", "onnx")
+BACKENDS = ("auto", "torch", "onnx", "onnx-int8")
 #: bump when the exported graph changes for the same weights (a new opset, sigmoid inside or not, ...)
 EXPORT_VERSION = 1
 OPSET = 17
@@ -62,9 +63,7 @@ class _WithSigmoid(nn.Module):
 class OnnxEngine:
     """ONNX Runtime's CPU execution provider over an exported detector (dynamic batch, height and width)."""
 
-    name = "onnx"
-
-    def __init__(self, path: str | os.PathLike, threads: int | None = None) -> None:
+    def __init__(self, path: str | os.PathLike, threads: int | None = None, name: str = "onnx") -> None:
         ort = require_onnxruntime()
         options = ort.SessionOptions()
         options.intra_op_num_threads = threads or torch.get_num_threads()
@@ -72,7 +71,7 @@ class OnnxEngine:
         # 9.3 → 8.3 s with 2 threads (docs/detectors.md)
         options.add_session_config_entry("session.intra_op.allow_spinning", "0")
         options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        self.path = Path(path)
+        self.path, self.name = Path(path), name
         self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         self.input = self.session.get_inputs()[0].name
 
@@ -151,23 +150,35 @@ def onnx_available() -> bool:
     return True
 
 
-def resolve_backend(backend: str, device: str = "cpu") -> str:
-    """``auto`` → ``onnx`` on the CPU where ONNX Runtime is installed (1.5× eager PyTorch with crop-tracking,
-    heatmaps within 1e-4, the same F1: docs/detectors.md#speed), else ``torch``; other names unchanged."""
+def resolve_backend(backend: str, device: str = "cpu", int8: str | os.PathLike | None = None) -> str:
+    """``auto`` → ``onnx-int8`` on the CPU where ONNX Runtime is installed and the weights have an int8
+    companion ``int8`` (2.2–2.7× the float network, F1 within a point: docs/detectors.md#int8), ``onnx`` where
+    they have none (1.5× eager PyTorch with crop-tracking, heatmaps within 1e-4, the same F1), else ``torch``;
+    other names unchanged."""
     if backend == "auto":
-        return "onnx" if device == "cpu" and onnx_available() else "torch"
+        if device != "cpu" or not onnx_available():
+            return "torch"
+        return "onnx-int8" if int8 is not None else "onnx"
     return backend
 
 
 def make_engine(model: nn.Module, backend: str = "auto", frames_in: int = 3, device: str = "cpu",
-                onnx_dir: str | os.PathLike | None = None):
-    """A :class:`TorchEngine` or :class:`OnnxEngine` (exported and cached on first use) for ``model``;
-    ``backend`` ``auto``: :func:`resolve_backend`."""
-    backend = resolve_backend(backend, device)
+                onnx_dir: str | os.PathLike | None = None, int8: str | os.PathLike | None = None):
+    """A :class:`TorchEngine` or :class:`OnnxEngine` for ``model``: the float network exported and cached on
+    first use, or ``int8``, the weights' int8 companion (:func:`~.quantize.int8_companion`); ``backend``
+    ``auto``: :func:`resolve_backend`."""
+    backend = resolve_backend(backend, device, int8)
     if backend == "torch":
         return TorchEngine(model, device)
+    if backend in ("onnx", "onnx-int8") and device != "cpu":
+        raise ValueError(f"the ONNX backend runs on the CPU only, not {device!r}; use --backend torch")
     if backend == "onnx":
-        if device != "cpu":
-            raise ValueError(f"the ONNX backend runs on the CPU only, not {device!r}; use --backend torch")
         return OnnxEngine(cached_onnx(model, frames_in, onnx_dir))
+    if backend == "onnx-int8":
+        if int8 is None:
+            raise ValueError("--backend onnx-int8 needs the weights' int8 companion (NAME.int8.onnx beside "
+                             "NAME.pth.tar, made from those weights): make it with `python -m training.quantize "
+                             "--weights NAME.pth.tar`, or use --backend onnx")
+        require_onnxruntime()
+        return OnnxEngine(int8, name="onnx-int8")
     raise ValueError(f"unknown detector backend {backend!r}; choose one of {BACKENDS}")

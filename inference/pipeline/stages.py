@@ -41,7 +41,8 @@ class PipelineConfig:
         detector: ``wasb``, ``tracknetv2`` or ``monotrack``; detector_weights: checkpoint (None: shipped).
         trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
-        detector_backend: ``auto`` (ONNX Runtime on the CPU where installed), ``torch`` or ``onnx``; detector_crop: crop-tracking ``auto`` or ``off``.
+        detector_backend: ``auto`` (ONNX Runtime on the CPU where installed, int8 where the weights have an int8
+            companion), ``torch``, ``onnx`` or ``onnx-int8``; detector_crop: crop-tracking ``auto`` or ``off``.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
         rally_only: leave the events judged outside the point (warm-up bounces, the ball after it) out of
             events.csv (rally.yaml lists them either way).
@@ -79,8 +80,8 @@ class PipelineConfig:
             raise ValueError(f"step and batch_size must be ≥ 1, got {self.step}, {self.batch_size}")
         if self.pose_every < 0:
             raise ValueError(f"pose_every must be ≥ 1 (or 0: auto), got {self.pose_every}")
-        if self.detector_backend not in ("auto", "torch", "onnx") or self.detector_crop not in ("auto", "off"):
-            raise ValueError(f"detector_backend must be auto, torch or onnx and detector_crop auto or off, got "
+        if self.detector_backend not in ("auto", "torch", "onnx", "onnx-int8") or self.detector_crop not in ("auto", "off"):
+            raise ValueError(f"detector_backend must be auto, torch, onnx or onnx-int8 and detector_crop auto or off, got "
                              f"{self.detector_backend!r}, {self.detector_crop!r}")
 
 
@@ -291,7 +292,7 @@ def _detect_run(ctx: Context) -> Outcome:
     ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)
     write_ball_csv(ctx.detected_path, result.track)
     seen = int(np.sum(result.track.visibility > 0))
-    note = f"ball in {seen}/{result.n_frames} frames"
+    note = f"ball in {seen}/{result.n_frames} frames ({runner.engine.name})"
     if active is not None and not active.all():
         note += f" ({int((~active).sum())} frames outside court views not searched, {_scenes_path(ctx).name})"
     if ctx.cfg.detector_weights is None:
