@@ -121,9 +121,11 @@ def frame_shift(frame: np.ndarray, samples: np.ndarray, max_shift_px: float = 24
 
 
 def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
-                  max_shift_px: float = 24.0) -> DriftReport:
+                  max_shift_px: float = 24.0, known: DriftReport | None = None) -> DriftReport:
     """Sample a frame every ``every_s`` seconds of ``clip`` (:class:`inference.clipio.Clip`) and measure its
-    shift against ``camera``'s projected court lines (see the module docstring)."""
+    shift against ``camera``'s projected court lines (see the module docstring). Frames that ``known`` (an
+    earlier report for the same clip, camera and ``max_shift_px``) measured are taken from it, not measured
+    again."""
     from inference.video.masks import apply_mask, clip_mask
 
     fps = clip.info.fps
@@ -137,9 +139,10 @@ def measure_drift(clip, camera: Camera, court: Court, every_s: float = 1.0,
         return DriftReport(idx, np.zeros((len(idx), 2)), np.zeros(len(idx)), max(MIN_DRIFT_PX, 2 * rms), fps)
     rects = clip_mask(clip)
     shifts, support = [], []
+    done = {} if known is None else {f: (sh, sup) for f, sh, sup in zip(known.frames, known.shifts, known.support)}
     with clip.frames(cache_size=0) as src:
         for i in idx:
-            s, sup = frame_shift(apply_mask(src.read(i), rects), samples, max_shift_px)
+            s, sup = done[i] if i in done else frame_shift(apply_mask(src.read(i), rects), samples, max_shift_px)
             shifts.append(s)
             support.append(sup)
     return DriftReport(idx, np.array(shifts).reshape(-1, 2), np.array(support), max(MIN_DRIFT_PX, 2 * rms), fps)
@@ -196,14 +199,15 @@ class CameraTrack:
 
 
 def track_camera(clip, camera: Camera, court: Court, every_s: float = TRACK_EVERY_S,
-                 max_shift_px: float = 24.0) -> tuple[CameraTrack, DriftReport]:
-    """Match the court every ``every_s`` seconds (:func:`measure_drift`) and interpolate the shift to every
-    frame; frames where the court is not found (a cut, a close-up) are bridged from their neighbours.
+                 max_shift_px: float = 24.0, known: DriftReport | None = None) -> tuple[CameraTrack, DriftReport]:
+    """Match the court every ``every_s`` seconds (:func:`measure_drift`; the frames ``known`` measured already
+    are reused) and interpolate the shift to every frame; frames where the court is not found (a cut, a
+    close-up) are bridged from their neighbours.
 
     Raises:
         ValueError: the court was found in no sampled frame.
     """
-    report = measure_drift(clip, camera, court, every_s=every_s, max_shift_px=max_shift_px)
+    report = measure_drift(clip, camera, court, every_s=every_s, max_shift_px=max_shift_px, known=known)
     ok = report.valid
     if not ok.any():
         raise ValueError("the court's lines were found in no sampled frame: the camera cannot be tracked")

@@ -174,7 +174,7 @@ def _drift_note(ctx: Context) -> str:
         report = measure_drift(ctx.clip, ctx.clip.read_camera(), ctx.court)
         if not report.drifting:
             return ""
-        track, _ = track_camera(ctx.clip, ctx.clip.read_camera(), ctx.court)
+        track, _ = track_camera(ctx.clip, ctx.clip.read_camera(), ctx.court, known=report)  # its frames reused
     except (FormatError, ValueError) as e:  # a drift check never sinks the calibration
         return f"; drift not measured ({e})"
     track.write(track_path)

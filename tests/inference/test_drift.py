@@ -109,3 +109,21 @@ def test_infer_tracks_a_drifting_camera_and_the_3d_stage_uses_it(tmp_path):
     (still.root / "camera_track.csv").write_text("stale\n")  # from an older calibration: dropped
     report = run_pipeline(still, PipelineConfig(progress=False, pose="none"), only={"camera"}, log=lambda *_: None)
     assert not (still.root / "camera_track.csv").exists() and "tracked" not in report.stages[0].note
+
+
+def test_the_track_reuses_the_frames_the_drift_check_measured(monkeypatch):
+    """`rally3d infer` checks drift every second, then tracks every 0.2 s: the frames of the first pass are not
+    measured again, and the track is the same as measured from scratch."""
+    import inference.courtfit.drift as drift
+
+    clip, cam, court = Clip(SAMPLE), Camera.load(SAMPLE / "gt" / "camera.yaml"), load_court("padel")
+    first = measure_drift(clip, cam, court, every_s=2.0)
+    fresh, _ = drift.track_camera(clip, cam, court, every_s=0.5)
+    measured = []
+    real = drift.frame_shift
+    monkeypatch.setattr(drift, "frame_shift", lambda frame, *a, **k: measured.append(1) or real(frame, *a, **k))
+    reused, report = drift.track_camera(clip, cam, court, every_s=0.5, known=first)
+    overlap = len(set(first.frames) & set(report.frames))
+    assert overlap >= 4 and len(measured) == len(report.frames) - overlap
+    np.testing.assert_array_equal(reused.shift, fresh.shift)
+    np.testing.assert_array_equal(reused.measured, fresh.measured)
