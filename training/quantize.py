@@ -6,8 +6,8 @@
 The float network runs over the clips of ``--data`` (a clip folder, a dataset or a folder of clips) exactly as
 ``rally3d detect`` runs it (ONNX Runtime, crop-tracking: full frames and crops); every ``--every``-th window it
 is given is kept, up to ``--windows``, as calibration input for static quantisation
-(:func:`inference.detection.quantize.quantize_detector`). ``rally3d infer`` / ``rally3d detect`` then pick the
-companion up by themselves on the CPU (``--backend auto``) as long as the checkpoint's bytes do not change.
+(:func:`inference.detection.quantize.quantize_detector`). ``rally3d infer --detector-backend onnx-int8`` and
+``rally3d detect --backend onnx-int8`` then run it, as long as the checkpoint's bytes do not change.
 Calibrate on clips that look like what the detector will see (rendered clips are fine; a few hundred frames
 are enough); never on the clips you evaluate on. Recipe and figures: docs/detectors.md#int8.
 """

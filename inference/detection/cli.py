@@ -27,11 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int, default=1,
                    help="windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
     p.add_argument("--backend", choices=["auto", "torch", "onnx", "onnx-int8"], default="auto",
-                   help="auto (default): ONNX Runtime on the CPU where installed — the weights' int8 companion "
-                   "NAME.int8.onnx where they have one (~2.5x faster, F1 within a point), else the float network "
-                   "(same heatmaps within 1e-4, ~1.5x faster) —, else eager PyTorch; torch; onnx: the float network "
-                   "in ONNX Runtime (pip install 'rally3d[onnx]'), exported once and cached in $RALLY3D_CACHE/onnx; "
-                   "onnx-int8: the int8 companion (docs/detectors.md#int8)")
+                   help="auto (default): ONNX Runtime on the CPU where installed (same heatmaps within 1e-4, ~1.5x "
+                   "faster), else eager PyTorch; torch; onnx: ONNX Runtime (pip install 'rally3d[onnx]'), the "
+                   "checkpoint exported once and cached in $RALLY3D_CACHE/onnx; onnx-int8: the weights' int8 "
+                   "companion NAME.int8.onnx, ~2.5x faster but it loses a few %% of the weak detections "
+                   "(docs/detectors.md#int8)")
     p.add_argument("--crop", choices=["auto", "off"], default="auto",
                    help="auto (default): the full frame only to find the ball, then a quarter-size window "
                    "around where the tracker expects it; off: the full frame everywhere")

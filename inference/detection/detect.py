@@ -104,13 +104,13 @@ class BallDetectorRunner:
         batch_size: windows per forward pass (full-frame windows; crop-tracking runs one at a time).
         backend: ``torch`` (eager PyTorch: the library's default, what training's evaluation compares against),
             ``onnx`` (ONNX Runtime, CPU; exported and cached on first use, :mod:`.engine`), ``onnx-int8`` (the
-            weights' int8 companion, :mod:`.quantize`) or ``auto`` (ONNX Runtime on the CPU where installed — the
-            int8 companion when the weights have one —, else eager PyTorch: the default of ``rally3d infer`` and
+            weights' int8 companion, :mod:`.quantize`: faster, loses weak detections) or ``auto`` (ONNX Runtime's
+            float network on the CPU where installed, else eager PyTorch: the default of ``rally3d infer`` and
             ``rally3d detect``).
         crop: :class:`~.crop.CropConfig` for crop-tracking, ``None`` for the full frame everywhere.
         fold_bn: fold batch norms into the convolutions (an inference copy of ``model``).
-        int8: the weights' int8 companion (:func:`~.quantize.int8_companion`; :meth:`from_weights` finds it), run
-            by ``auto`` and ``onnx-int8`` on the CPU.
+        int8: the weights' int8 companion (:func:`~.quantize.int8_companion`; :meth:`from_weights` finds it for
+            ``onnx-int8``), run by ``onnx-int8`` on the CPU.
     """
 
     model: torch.nn.Module
@@ -150,7 +150,7 @@ class BallDetectorRunner:
             raise FileNotFoundError(f"no shipped weights for {name!r}; pass the path of a checkpoint "
                                     "(weights are never downloaded)")
         model, spec, _ = load_detector(weights, name, trust=trust)
-        if "int8" not in kw and kw.get("backend", "torch") in ("auto", "onnx-int8"):
+        if "int8" not in kw and kw.get("backend", "torch") == "onnx-int8":
             from .quantize import int8_companion
 
             kw["int8"] = int8_companion(weights)

@@ -6,8 +6,9 @@ convolutional), so the crop-tracking windows run through the same engine as full
 
 The ONNX file is exported from the (batch-norm folded) PyTorch model on first use and cached under
 ``$RALLY3D_CACHE/onnx`` (default ``~/.cache/rally3d/onnx``), named by a hash of the weights, so a changed
-checkpoint is exported again; nothing is ever downloaded. A checkpoint's int8 companion (``NAME.int8.onnx``
-beside it, :mod:`.quantize`) runs instead where ``auto`` finds one made from those exact weights.
+checkpoint is exported again; nothing is ever downloaded. ``onnx-int8`` runs a checkpoint's int8 companion
+(``NAME.int8.onnx`` beside it, :mod:`.quantize`) instead: 2.1–2.7× faster, but not the default (it loses a few
+% of the weak detections, the ones near contacts: docs/detectors.md#int8).
 
 Example:
     >>> engine = make_engine(model, backend="onnx", frames_in=3)
@@ -150,15 +151,13 @@ def onnx_available() -> bool:
     return True
 
 
-def resolve_backend(backend: str, device: str = "cpu", int8: str | os.PathLike | None = None) -> str:
-    """``auto`` → ``onnx-int8`` on the CPU where ONNX Runtime is installed and the weights have an int8
-    companion ``int8`` (2.2–2.7× the float network, F1 within a point: docs/detectors.md#int8), ``onnx`` where
-    they have none (1.5× eager PyTorch with crop-tracking, heatmaps within 1e-4, the same F1), else ``torch``;
-    other names unchanged."""
+def resolve_backend(backend: str, device: str = "cpu") -> str:
+    """``auto`` → ``onnx`` on the CPU where ONNX Runtime is installed (1.5× eager PyTorch with crop-tracking,
+    heatmaps within 1e-4, the same F1: docs/detectors.md#speed), else ``torch``; other names unchanged. The int8
+    companion (``onnx-int8``) is never chosen by ``auto``: it is faster but loses weak detections
+    (docs/detectors.md#int8)."""
     if backend == "auto":
-        if device != "cpu" or not onnx_available():
-            return "torch"
-        return "onnx-int8" if int8 is not None else "onnx"
+        return "onnx" if device == "cpu" and onnx_available() else "torch"
     return backend
 
 
@@ -167,7 +166,7 @@ def make_engine(model: nn.Module, backend: str = "auto", frames_in: int = 3, dev
     """A :class:`TorchEngine` or :class:`OnnxEngine` for ``model``: the float network exported and cached on
     first use, or ``int8``, the weights' int8 companion (:func:`~.quantize.int8_companion`); ``backend``
     ``auto``: :func:`resolve_backend`."""
-    backend = resolve_backend(backend, device, int8)
+    backend = resolve_backend(backend, device)
     if backend == "torch":
         return TorchEngine(model, device)
     if backend in ("onnx", "onnx-int8") and device != "cpu":

@@ -5,9 +5,9 @@ ONNX and statically quantised (QDQ: int8 weights per output channel, uint8 activ
 measured on calibration windows of rendered clips; the first convolution, which sees the normalised frames,
 and the last, which writes the heatmaps, stay in float). The companion records the SHA-256 of the checkpoint
 it was made from; :func:`int8_companion` returns it only while it matches, so a retrained checkpoint never
-runs through a stale companion. ``rally3d infer`` / ``rally3d detect`` use it by default on the CPU
-(``--backend auto``; ``onnx`` keeps the float network). Figures and the recipe: docs/detectors.md
-(section "int8").
+runs through a stale companion. ``rally3d infer --detector-backend onnx-int8`` / ``rally3d detect --backend
+onnx-int8`` run it (2.1–2.7× faster; not the default: it loses a few % of the weak detections, and events and
+3D with them). Figures and the recipe: docs/detectors.md (section "int8").
 
 Example:
     >>> path = int8_companion(Path("inference/weights/wasb_padel.pth.tar"))   # None when absent or stale

@@ -58,9 +58,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="detector windows per forward pass (default 1: fastest on a CPU; raise it on a GPU)")
     p.add_argument("--step", type=int, default=3, help="detector window step in frames (default 3)")
     p.add_argument("--detector-backend", choices=["auto", "torch", "onnx", "onnx-int8"], default="auto",
-                   help="auto (default): ONNX Runtime on the CPU where installed (the weights' int8 companion where "
-                   "they have one: docs/detectors.md#int8), else eager PyTorch; torch; onnx: the float network "
-                   "(rally3d[onnx]); onnx-int8")
+                   help="auto (default): ONNX Runtime on the CPU where installed, else eager PyTorch; torch; onnx "
+                   "(rally3d[onnx]); onnx-int8: the weights' int8 companion, ~2.5x faster detection that loses a few "
+                   "%% of the weak detections (docs/detectors.md#int8)")
     p.add_argument("--detector-crop", choices=["auto", "off"], default="auto",
                    help="auto (default): the full frame only to find the ball, then a window around it; off")
     p.add_argument("--device", default="cpu", help="cpu or cuda (single clip)")

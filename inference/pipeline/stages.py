@@ -41,8 +41,8 @@ class PipelineConfig:
         detector: ``wasb``, ``tracknetv2`` or ``monotrack``; detector_weights: checkpoint (None: shipped).
         trust_checkpoint: allow a detector checkpoint that holds pickled objects (runs their code).
         step: detector window step (frames); batch_size: windows per forward pass.
-        detector_backend: ``auto`` (ONNX Runtime on the CPU where installed, int8 where the weights have an int8
-            companion), ``torch``, ``onnx`` or ``onnx-int8``; detector_crop: crop-tracking ``auto`` or ``off``.
+        detector_backend: ``auto`` (ONNX Runtime on the CPU where installed), ``torch``, ``onnx`` or ``onnx-int8``
+            (the weights' int8 companion); detector_crop: crop-tracking ``auto`` or ``off``.
         events: hit-event checkpoint (None: the shipped model of the clip's sport).
         rally_only: leave the events judged outside the point (warm-up bounces, the ball after it) out of
             events.csv (rally.yaml lists them either way).

@@ -1,5 +1,6 @@
-"""int8 companions of detector weights: made by `python -m training.quantize`, picked by `--backend auto` only
-while they match the checkpoint's bytes, and the shipped one finds the ball where the float network does."""
+"""int8 companions of detector weights: made by `python -m training.quantize`, run by `--backend onnx-int8` only
+while they match the checkpoint's bytes (never by `auto`), and the shipped one finds the ball where the float
+network does."""
 from __future__ import annotations
 
 import logging
@@ -43,7 +44,7 @@ def clip(tmp_path_factory):
 
 
 @needs_ort
-def test_quantize_then_detect_picks_the_companion_until_the_weights_change(clip, tmp_path, monkeypatch, capsys,
+def test_quantize_then_detect_runs_the_companion_until_the_weights_change(clip, tmp_path, monkeypatch, capsys,
                                                                           caplog):
     from training.quantize import main as quantize_main
 
@@ -56,16 +57,18 @@ def test_quantize_then_detect_picks_the_companion_until_the_weights_change(clip,
     assert int8_companion(weights) == companion
 
     out = tmp_path / "ball.csv"
-    assert main(["detect", str(clip.root), "--weights", str(weights), "--out", str(out)]) == 0
+    assert main(["detect", str(clip.root), "--weights", str(weights), "--backend", "onnx-int8", "--out", str(out)]) == 0
     assert "onnx-int8; windows" in capsys.readouterr().out and out.is_file()
+    assert main(["detect", str(clip.root), "--weights", str(weights), "--out", str(out)]) == 0
+    assert "onnx; windows" in capsys.readouterr().out          # auto: the float network, companion or not
 
-    # the checkpoint retrained (other bytes): the stale companion is named and the float network runs
+    # the checkpoint retrained (other bytes): the stale companion is named and never run
     save_wasb_checkpoint(build_model("monotrack"), weights, epoch=7)
     with caplog.at_level(logging.WARNING):
         assert int8_companion(weights) is None
     assert "training.quantize" in caplog.text
-    assert main(["detect", str(clip.root), "--weights", str(weights), "--out", str(out)]) == 0
-    assert "onnx; windows" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="training.quantize"):
+        BallDetectorRunner.from_weights("monotrack", weights, backend="onnx-int8")
 
 
 @needs_ort
@@ -86,14 +89,14 @@ def test_quantize_tool_names_a_folder_without_clips(tmp_path, capsys):
 
 @needs_ort
 def test_the_shipped_companion_matches_the_shipped_weights_and_finds_the_same_ball(tmp_path):
-    """Retraining wasb_padel.pth.tar without re-quantising would ship a stale companion (auto would then quietly
-    run the float network): its recorded SHA-256 must be the checkpoint's. On the padel sample's frames the int8
+    """Retraining wasb_padel.pth.tar without re-quantising would ship a stale companion (onnx-int8 would then
+    refuse to run): its recorded SHA-256 must be the checkpoint's. On the padel sample's frames the int8
     heatmaps peak where the float ones do."""
     companion = companion_path(SHIPPED["wasb"])
     assert companion.is_file(), "the shipped int8 companion is missing: python -m training.quantize --data ..."
     assert source_sha256(companion) == file_sha256(SHIPPED["wasb"]), f"{companion}: stale, lacks {SOURCE_KEY}"
     fp32 = BallDetectorRunner.from_weights("wasb", SHIPPED["wasb"], backend="onnx", onnx_dir=tmp_path)
-    int8 = BallDetectorRunner.from_weights("wasb", SHIPPED["wasb"], backend="auto", onnx_dir=tmp_path)
+    int8 = BallDetectorRunner.from_weights("wasb", SHIPPED["wasb"], backend="onnx-int8", onnx_dir=tmp_path)
     assert int8.engine.name == "onnx-int8" and fp32.engine.name == "onnx"
     clip = Clip(SAMPLE)
     lb = Letterbox(clip.info.width, clip.info.height, 512, 288)
