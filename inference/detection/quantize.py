@@ -58,7 +58,7 @@ def source_sha256(path: str | os.PathLike) -> str | None:
 
         model = onnx.load(str(path), load_external_data=False)
     except Exception as e:  # noqa: BLE001 - an unreadable companion is no companion: say so and go on
-        log.warning("%s: not a readable ONNX file (%s); the float network is used", path, e)
+        log.warning("%s: not a readable ONNX file (%s); it is not used", path, e)
         return None
     return next((p.value for p in model.metadata_props if p.key == SOURCE_KEY), None)
 
@@ -73,8 +73,8 @@ def int8_companion(weights: str | os.PathLike | None) -> Path | None:
         return None
     recorded = source_sha256(path)
     if recorded is None or recorded != file_sha256(weights):
-        log.warning("%s was not made from %s (its checkpoint changed since): the float network is used; "
-                    "make a new one with `python -m training.quantize --weights %s`", path, Path(weights).name, weights)
+        log.warning("%s was not made from %s (the checkpoint changed since): it is not used; make a new one with "
+                    "`python -m training.quantize --weights %s`", path, Path(weights).name, weights)
         return None
     return path
 
