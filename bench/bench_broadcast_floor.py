@@ -78,7 +78,8 @@ def physics(out: Clip, sport: str) -> dict:
     below = contacts[:, 2] < court.ball.radius - INSIDE_TOLERANCE_M if len(contacts) else np.zeros(0, bool)
     zs = np.concatenate([xyz[:, 2], contacts[:, 2]])
     zmin = float(zs.min()) if len(zs) else float("nan")
-    limit = RMS_FACTOR * JointConfig().pixel_sigma
+    # the clip's own limit (4 × its measured 2D noise), as the pipeline applied it; the default σ for older files
+    limit = seg.get("plausibility", {}).get("rms_limit_px") or RMS_FACTOR * JointConfig().pixel_sigma
     over = [s for s in ok if (s.get("reprojection_rms_px") or 0) > limit]
     return {"flights": len(flights), "ok": len(ok), "reasons": reasons, "frames": len(xyz),
             "inside": float(np.mean(depth <= INSIDE_TOLERANCE_M)) if len(xyz) else float("nan"),
