@@ -111,15 +111,9 @@ def quantize_detector(fp32: str | os.PathLike, windows: list[np.ndarray], out: s
     with tempfile.TemporaryDirectory(prefix="rally3d-quant-") as tmp:
         pre, q = Path(tmp) / "pre.onnx", Path(tmp) / "int8.onnx"
         quant_pre_process(str(fp32), str(pre), skip_symbolic_shape=True)
-        keep_float = _float_ends(onnx.load(str(pre)))
-        cwd = os.getcwd()
-        os.chdir(tmp)   # the calibrator writes its scratch model into the working directory
-        try:
-            quantize_static(str(pre), str(q), Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
-                            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                            calibrate_method=CalibrationMethod.MinMax, nodes_to_exclude=keep_float)
-        finally:
-            os.chdir(cwd)
+        quantize_static(str(pre), str(q), Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
+                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                        calibrate_method=CalibrationMethod.MinMax, nodes_to_exclude=_float_ends(onnx.load(str(pre))))
         model = onnx.load(str(q))
         entry = model.metadata_props.add()
         entry.key, entry.value = SOURCE_KEY, source_sha256

@@ -292,8 +292,7 @@ def _detect_run(ctx: Context) -> Outcome:
     ctx.detected_path.parent.mkdir(parents=True, exist_ok=True)
     write_ball_csv(ctx.detected_path, result.track)
     seen = int(np.sum(result.track.visibility > 0))
-    engine = getattr(getattr(runner, "engine", None), "name", "")   # which network ran: onnx-int8, onnx, torch
-    note = f"ball in {seen}/{result.n_frames} frames" + (f" ({engine})" if engine else "")
+    note = f"ball in {seen}/{result.n_frames} frames ({runner.engine.name})"   # which network ran
     if active is not None and not active.all():
         note += f" ({int((~active).sum())} frames outside court views not searched, {_scenes_path(ctx).name})"
     if ctx.cfg.detector_weights is None:

@@ -254,17 +254,6 @@ def select_players(tracks: list[Track], court: Court, fps: float, cfg: TrackingC
     return chosen
 
 
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of one box ``a (4,)`` with boxes ``b (N, 4)`` (``x1, y1, x2, y2``) → (N,)."""
-    b = np.asarray(b, float).reshape(-1, 4)
-    w = np.clip(np.minimum(a[2], b[:, 2]) - np.maximum(a[0], b[:, 0]), 0, None)
-    h = np.clip(np.minimum(a[3], b[:, 3]) - np.maximum(a[1], b[:, 1]), 0, None)
-    inter = w * h
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]) - inter
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(union > 0, inter / union, 0.0)
-
-
 def extend_ends(players: list[Track], seq: PoseSequence, camera: Camera, fps: float, cfg: TrackingConfig
                 ) -> list[Track]:
     """Each chosen player's track carried past its ends onto the looks the tracker left out: the first looks
@@ -273,6 +262,11 @@ def extend_ends(players: list[Track], seq: PoseSequence, camera: Camera, fps: fl
     continues a track when its box overlaps the track's box at that end by ≥ ``extend_iou`` (no other player's
     box more), for at most ``extend_s`` and across at most ``extend_miss`` looks in a row without one; the court
     position comes from its keypoints (NaN when the feet are out of the picture)."""
+    from supervision import box_iou_batch
+
+    def iou_with(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:   # (N,); NaN boxes overlap nothing
+        return box_iou_batch(box[None], np.asarray(boxes, float).reshape(-1, 4))[0]
+
     looked = np.flatnonzero(seq.looked) if seq.looked is not None else np.arange(len(seq))
     reach = cfg.extend_s * fps
     out = [t for t in players]
@@ -286,10 +280,10 @@ def extend_ends(players: list[Track], seq: PoseSequence, camera: Camera, fps: fl
             for f in steps[np.abs(steps - end) <= reach].tolist():
                 p = seq.frames[f]
                 ok = (p.scores >= cfg.min_person_score) & np.isfinite(p.boxes).all(axis=1)
-                iou = np.where(ok, box_iou(box, p.boxes), 0.0)
+                iou = np.where(ok, iou_with(box, p.boxes), 0.0)
                 for j, other in enumerate(out):  # a detection another player's track holds there is theirs
                     if j != k and np.isin(f, other.frames):
-                        taken = box_iou(other.boxes[np.searchsorted(other.frames, f)], p.boxes) > 0.5
+                        taken = iou_with(other.boxes[np.searchsorted(other.frames, f)], p.boxes) > 0.5
                         iou = np.where(taken, 0.0, iou)
                 i = int(np.argmax(iou)) if len(iou) else -1
                 if i < 0 or iou[i] < cfg.extend_iou:

@@ -70,6 +70,8 @@ class EveryFramePoses:
 class EveryFrameBall:
     """A ball detector that reports the generated ball in every frame, close-ups included."""
 
+    engine = SimpleNamespace(name="every-frame")
+
     def __init__(self, truth):
         self.truth = truth
 
