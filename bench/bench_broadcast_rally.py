@@ -9,9 +9,9 @@ unpainted outline, floor logos, a score box and an advertising board; lobs leave
 ball comes off the glass) and starts the clip in the middle of a flight after the serve. Only the 12 floor
 points of its ``court_points.csv`` are kept (~1.5 px click noise), and ``rally3d infer VIDEO --court padel
 --court-points floor12.csv`` runs every stage with the shipped models (detector, MoveNet's players, the event
-tagger, the 3D): never the ground truth. Per clip: the ball's 2D track against the truth (precision / recall at
-τ = 10 px at 1280×720, 15 px here: where events and 3D start), events F1 (±1 frame at 25 fps) and the true contacts missed
-by class; flights reconstructed / all and why the others failed; the share of the frames between the first and
+tagger, the 3D): never the ground truth. Per clip: the ball's 2D track against the truth (precision / recall
+at τ = 10 px at 1280×720, 15 px here: where events and 3D start), events F1 (±1 frame at 25 fps) and the true
+contacts missed by class; flights reconstructed / all and why the others failed; the share of the frames between the first and
 the last event covered by reconstructed flights (the issue's "≥ 80 % plausible 3D"), and the shares of those
 frames whose 3D is within 0.5 m of the truth and over 1 m off (coverage alone counts a wrong flight); the clip's plausibility
 verdict; written flights over the RMS limit; frames below the floor; 3D MAE / MedAE against the ground truth
@@ -149,7 +149,8 @@ def main(argv=None) -> int:
             r = one_clip(sport, seed, args.frames, work, args.pose)
             rows.append(r)
             missed = ", ".join(f"{e} {n}" for e, n in sorted(r["missed"].items())) or "none"
-            print(f"| {r['seed']} | {r['n_frames']} | {r['ball_p']:.2f} / {r['ball_r']:.2f} | {r['ev_f1']:.3f} | {missed} | {r['ok']}/{r['flights']} | "
+            print(f"| {r['seed']} | {r['n_frames']} | {r['ball_p']:.2f} / {r['ball_r']:.2f} | {r['ev_f1']:.3f} | "
+                  f"{missed} | {r['ok']}/{r['flights']} | "
                   f"{100 * r['covered']:.0f} % | {'yes' if r['plausible'] else 'no'} | "
                   f"{100 * r['good']:.0f} / {100 * r['bad']:.0f} % | {r['over']} | "
                   f"{r['frames_below']} | {r['mae']:.2f} / {r['medae']:.2f} | {r['refits']} | {r['cpu']:.0f} |",
@@ -166,7 +167,8 @@ def main(argv=None) -> int:
               f"{sum(bool(r['plausible']) for r in rows)}/{len(rows)}; flights {sum(r['ok'] for r in rows)}/"
               f"{sum(r['flights'] for r in rows)}; written over the RMS limit {sum(r['over'] for r in rows)}; "
               f"ball 2D precision / recall {np.nanmean([r['ball_p'] for r in rows]):.2f} / "
-              f"{np.nanmean([r['ball_r'] for r in rows]):.2f}; events F1 {np.nanmean([r['ev_f1'] for r in rows]):.3f}; CPU {sum(r['cpu'] for r in rows):.0f} s")
+              f"{np.nanmean([r['ball_r'] for r in rows]):.2f}; events F1 {np.nanmean([r['ev_f1'] for r in rows]):.3f}; "
+              f"CPU {sum(r['cpu'] for r in rows):.0f} s")
         print("\nWhy flights failed / why a clip is not plausible:")
         for r in rows:
             for why in r["reasons"]:
