@@ -1,23 +1,32 @@
-"""Labeler speed: server-side time to serve the next frame, and end-to-end step latency in headless Chromium.
+"""Labeler speed: key → the new frame on screen, read from the canvas, in headless Chromium.
 
-For a 720p and a 1080p synthetic H.264 clip (``rally3d synth``, generated into a temporary folder):
+For synthetic H.264 clips (``rally3d synth``, generated into a temporary folder) at 720p, 1080p and 4K:
 
-* **serve next frame (cold)**: decode + JPEG-encode of frame i+1 by :class:`labeler.frames.FrameCache` with
-  prefetching off, i.e. what a step costs when the frame is not cached yet;
-* **serve next frame (prefetched)**: the same request once the prefetch thread has had the frame in hand;
-* **key L → status line / new image on screen**: hotkey ``L`` in headless Debian Chromium (software WebGL),
-  timed in the page from the ``keydown`` event to the status line naming the new frame, and to the first
-  animation frame whose pixels (the frame-number box burned into each picture, read back from the WebGL canvas)
-  differ from the old picture's: the image on screen, not the text. Once with one image plane (the JPEG is
-  sent and decoded after the key) and once with the frame stack (:mod:`labeler.framestack`, the next frames
-  already in the browser), in the same run.
+* **serve next frame (cold / prefetched)**: decode + JPEG-encode of frame i+1 by :class:`labeler.frames.FrameCache`
+  with prefetching off, and the same once the prefetch thread has had the frame in hand (server side);
+* **key → new frame on screen**, in headless Debian Chromium (software WebGL). Every picture carries its frame
+  number as a binary code under the burned-in ``#number`` (:func:`labeler.frames.stamp_frame_number`); the page
+  reads the code's cells back from the WebGL canvas at every animation frame, and the latency is the time from
+  the key's ``keydown`` to the first animation frame whose code reads the new frame's number. The same
+  reading for every variant:
 
-Prints median and p95 per row. Usage:
-``.venv/bin/python bench/bench_labeler.py [--steps 40] [--frames 90] [--dwell 0.3] [--sizes 1280x720]``.
+  - ``L`` (one frame) and ``Shift+L`` (ten frames), each after a pause on the frame;
+  - **holding L** for 3 s: frames per second shown while held (distinct codes read per second after the first
+    change) and the largest lag behind the clip's clock;
+  - **intermediate renders**: animation frames during a step whose picture changed while the code still read
+    the old number (the old picture drawn again, e.g. moved), counted over all steps;
+
+  for each variant: ``page`` (the page's frame player, :mod:`labeler.player_js`) and ``server`` (a JPEG sent
+  per step, the fallback), each idle and with a CPU-bound job beside it (one busy process per core).
+
+Prints median and p95 per row, and the CPU time of this process. Usage:
+``.venv/bin/python bench/bench_labeler.py [--steps 30] [--sizes 1280x720,1920x1080,3840x2160]
+[--variants page,server] [--loads idle,busy] [--no-browser]``.
 """
 from __future__ import annotations
 
 import argparse
+import inspect
 import os
 import shutil
 import socket
@@ -35,6 +44,7 @@ sys.path.insert(0, str(REPO))
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
          "--disable-component-update", "--disable-sync", "--enable-unsafe-swiftshader"]
 CANVAS = 'canvas[data-engine^="three.js"]'
+HOLD_S = 3.0
 
 
 def make_clip(root: Path, size: str, frames: int) -> Path:
@@ -45,9 +55,11 @@ def make_clip(root: Path, size: str, frames: int) -> Path:
     return next(p.parent for p in sorted(out.glob("*/clip.yaml")))
 
 
-def stats(seconds: list[float]) -> str:
-    ms = np.asarray(seconds) * 1000
-    return f"{np.median(ms):8.1f} {np.percentile(ms, 95):8.1f}"
+def stats(values: list[float], scale: float = 1000.0) -> str:
+    if not values:
+        return f"{'–':>8} {'–':>8}"
+    v = np.asarray(values) * scale
+    return f"{np.median(v):8.1f} {np.percentile(v, 95):8.1f}"
 
 
 def serve_times(clip_dir: Path, steps: int) -> tuple[list[float], list[float]]:
@@ -74,132 +86,212 @@ def serve_times(clip_dir: Path, steps: int) -> tuple[list[float], list[float]]:
     return cold, warm
 
 
-ON_SCREEN_JS = """
-(region) => {
+KEY_JS = """
+window.__r3dKeys = [];
+window.addEventListener("keydown", (ev) => window.__r3dKeys.push(ev.timeStamp), true);
+"""
+"""Registered before any page script (Playwright init script): the first keydown listener of the window, so
+it sees the key even where the page's player stops the event."""
+
+READ_JS = """
+(cfg) => {
   const src = document.querySelector('canvas[data-engine^="three.js"]');
   const probe = document.createElement("canvas");
-  probe.width = Math.max(1, Math.round(region.w)); probe.height = Math.max(1, Math.round(region.h));
+  probe.width = src.width; probe.height = src.height;
   const ctx = probe.getContext("2d", {willReadFrequently: true});
-  const read = () => {
-    ctx.drawImage(src, region.x, region.y, region.w, region.h, 0, 0, probe.width, probe.height);
-    return ctx.getImageData(0, 0, probe.width, probe.height).data;
+  const px = (pts) => {
+    const out = [];
+    for (const [x, y] of pts) {
+      const d = ctx.getImageData(Math.round(x * cfg.dpr), Math.round(y * cfg.dpr), 1, 1).data;
+      out.push((d[0] + d[1] + d[2]) / 3);
+    }
+    return out;
   };
-  // a new picture: at least 12 pixels of the number box changed by more than 60 levels (the renderer's
-  // fade-in after each redraw moves every pixel by a level or two, and is not a new picture)
-  const changed = (a, b) => {
+  const R = window.__r3dRead = {log: [], running: true};
+  const tick = (t) => {
+    if (!R.running) return;
+    ctx.drawImage(src, 0, 0);
+    const bits = px(cfg.code);
     let n = 0;
-    for (let i = 0; i < a.length; i += 4) {
-      if (Math.abs(a[i] - b[i]) + Math.abs(a[i + 1] - b[i + 1]) + Math.abs(a[i + 2] - b[i + 2]) > 60) n += 1;
-    }
-    return n >= 12;
-  };
-  const r = window.__r3d = {armed: false, key: null, image: null, status: null, before: null, expect: ""};
-  r.arm = (expect) => { r.key = r.image = r.status = r.before = null; r.expect = expect; r.armed = true; };
-  document.addEventListener("keydown", (ev) => { if (r.armed && r.key === null) r.key = ev.timeStamp; }, true);
-  const tick = () => {
-    if (r.armed && r.key === null && r.before === null) r.before = read().slice();  // the old picture
-    if (r.armed && r.key !== null && r.before !== null) {
-      const now = performance.now();
-      if (r.status === null && document.body.textContent.includes(r.expect)) r.status = now;
-      if (r.image === null && changed(read(), r.before)) r.image = now;
-      if (r.status !== null && r.image !== null) r.armed = false;
-    }
+    for (const b of bits) n = n * 2 + (b > 127 ? 1 : 0);
+    R.log.push([performance.now(), n, px(cfg.grid)]);
+    if (R.log.length > 20000) R.log.splice(0, 10000);
     requestAnimationFrame(tick);
   };
   requestAnimationFrame(tick);
 }
 """
-"""Measures in the page: from the key's ``keydown`` to (a) the status line naming the new frame and (b) the first
-animation frame whose pixels in the frame-number box of the picture differ from the old picture's, i.e. the new
-image on screen (the three.js canvas read back every animation frame)."""
+"""Reads, at every animation frame, the frame code (``cfg.code``: cell centres in CSS px) and a few picture
+pixels (``cfg.grid``) from the WebGL canvas; ``window.__r3dRead.log`` holds ``[time, code, grid]``."""
+
+
+class Busy:
+    """One busy process per core (a CPU-bound job beside the browser and the server), while in ``with``."""
+
+    def __init__(self, on: bool):
+        self.on, self.procs = on, []
+
+    def __enter__(self):
+        if self.on:
+            self.procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 2)]
+        return self
+
+    def __exit__(self, *exc):
+        for p in self.procs:
+            p.kill()
+            p.wait()
 
 
 def wait_for(fn, what: str, timeout_s: float = 180.0):
-    """``fn()``'s first truthy value, polled; a clear error naming ``what`` after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         value = fn()
         if value:
             return value
-        time.sleep(0.05)
+        time.sleep(0.02)
     raise TimeoutError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
-def browser_steps(clip_dir: Path, steps: int, chromium: str, slots: int, dwell_s: float) -> tuple[list, list]:
-    """Step ``steps`` times with the hotkey L in headless Chromium; (status-line, image-on-screen) seconds.
+def make_app(clip_dir: Path, port: int, variant: str):
+    from labeler.app import LabelerApp
 
-    ``slots``: image planes per tab (1 = the JPEG is sent and decoded after the key, as before the frame stack).
-    """
+    params = inspect.signature(LabelerApp).parameters
+    if "page_player" in params:
+        return LabelerApp(clip_dir, port=port, page_player=(variant == "page"))
+    return LabelerApp(clip_dir, port=port, frame_slots=10 if variant == "stack" else 1)  # before the page player
+
+
+def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s: float) -> dict:
+    """One browser session: ``steps`` × L, ``steps // 3`` × Shift+L, then L held for :data:`HOLD_S` seconds."""
     from playwright.sync_api import sync_playwright
 
-    from labeler.app import LabelerApp
+    from labeler.frames import code_cell_centres
     from labeler.viewer_common import screen_of_pixel
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    app = LabelerApp(clip_dir, port=port, frame_slots=slots)
-    status, image = [], []
+    app = make_app(clip_dir, port, variant)
+    out = {"one": [], "ten": [], "intermediate": 0, "missed": 0}
     try:
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=chromium, headless=True, args=FLAGS)
             page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.add_init_script(KEY_JS)
             page.goto(f"http://127.0.0.1:{port}/?fixedDpr=1", wait_until="load")
             page.wait_for_selector(CANVAS, timeout=60_000)
             view = wait_for(lambda: next(iter(app.views.values()), None), "the labeler view")
             wait_for(lambda: view.shown >= 0 and view.camera_fitted, "the first frame and the fitted camera")
-            time.sleep(1.5)
+            if variant == "page":
+                wait_for(lambda: getattr(view, "paged", False), "the page's player")
+            time.sleep(2.0)
             box = page.locator(CANVAS).bounding_box()
-            w = view.plane.width
-            corner = np.array([[0.0, 0.0], [0.1 * w, 0.05 * w]])  # the frame-number box at the top-left
-            (x0, y0), (x1, y1) = screen_of_pixel(corner, view.plane, box["width"], box["height"], view.fit_distance)
-            page.evaluate(ON_SCREEN_JS, {"x": x0, "y": y0, "w": x1 - x0, "h": y1 - y0})
-            for i in range(1, steps + 1):
-                time.sleep(dwell_s)  # the annotator looks at the frame, then steps (not auto-repeat)
-                page.evaluate(f"window.__r3d.arm('frame {i} / ')")
-                page.wait_for_function("window.__r3d.before !== null", timeout=30_000)
-                page.keyboard.press("l")
-                page.wait_for_function("!window.__r3d.armed", timeout=30_000)
-                key, st, im = page.evaluate("[window.__r3d.key, window.__r3d.status, window.__r3d.image]")
-                status.append((st - key) / 1000)
-                image.append((im - key) / 1000)
-                print(f"\r  {slots} plane(s): step {i}/{steps}", end="", file=sys.stderr, flush=True)
-            print(file=sys.stderr)
+            plane, w, h = view.plane, view.plane.width, view.plane.height
+            code = screen_of_pixel(code_cell_centres(w), plane, box["width"], box["height"], view.fit_distance)
+            grid_px = np.array([[x, y] for x in (0.3, 0.5, 0.7) for y in (0.3, 0.5, 0.7)]) * [w, h]
+            grid = screen_of_pixel(grid_px, plane, box["width"], box["height"], view.fit_distance)
+            page.evaluate(READ_JS, {"code": code.tolist(), "grid": grid.tolist(), "dpr": 1})
+            fps = float(view.session.fps)
+            frame = 0
+
+            def shown_code() -> int:
+                return page.evaluate("window.__r3dRead.log.at(-1)[1]")
+
+            wait_for(lambda: shown_code() == frame, "frame 0's code on the canvas", 60)
+
+            def step(key: str, expect: int) -> float | None:
+                time.sleep(dwell_s)
+                t_mark = page.evaluate("performance.now()")
+                n_keys = page.evaluate("window.__r3dKeys.length")
+                page.keyboard.press(key)
+                try:
+                    wait_for(lambda: shown_code() == expect, f"frame {expect} on screen", 30)
+                except TimeoutError:
+                    out["missed"] += 1
+                    return None
+                key_t = page.evaluate(f"window.__r3dKeys[{n_keys}]")
+                log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t_mark})")
+                first = next(r for r in log if r[0] >= key_t and r[1] == expect)
+                before = [r for r in log if r[0] < key_t]
+                ref = np.asarray(before[-1][2] if before else log[0][2])
+                old = before[-1][1] if before else None
+                for r in log:  # the old number still read, but the picture changed: an intermediate render
+                    if key_t <= r[0] < first[0] and r[1] == old and np.abs(np.asarray(r[2]) - ref).max() > 40:
+                        out["intermediate"] += 1
+                        break
+                return (first[0] - key_t) / 1000
+
+            for _ in range(steps):
+                frame += 1
+                dt = step("l", frame)
+                if dt is not None:
+                    out["one"].append(dt)
+            for _ in range(max(steps // 3, 3)):
+                frame += 10
+                dt = step("Shift+L", frame)
+                if dt is not None:
+                    out["ten"].append(dt)
+            time.sleep(1.0)
+            t0 = page.evaluate("performance.now()")
+            page.keyboard.down("l")
+            time.sleep(HOLD_S)
+            page.keyboard.up("l")
+            time.sleep(0.5)
+            log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t0})")
+            changes = [(t, n) for (t, n, _), (_, m, _) in zip(log[1:], log[:-1]) if n != m]
+            if len(changes) >= 2:
+                span = (changes[-1][0] - changes[0][0]) / 1000
+                out["hold_fps"] = (len(changes) - 1) / max(span, 1e-3)
+                out["hold_frames"] = changes[-1][1] - changes[0][1]
+                # lag: how far the frame shown is behind a clock started at the first change
+                out["hold_lag"] = max(0.0, max((t - changes[0][0]) / 1000 * fps - (n - changes[0][1])
+                                               for t, n in changes) / fps)
             browser.close()
     finally:
         app.stop()
-    return status, image
+    return out
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--steps", type=int, default=40)
-    ap.add_argument("--frames", type=int, default=90, help="frames of each generated clip")
+    ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--chromium", default="/usr/bin/chromium")
     ap.add_argument("--no-browser", action="store_true", help="only the server-side rows")
-    ap.add_argument("--dwell", type=float, default=0.3, help="seconds on each frame before the next key")
-    ap.add_argument("--sizes", default="1280x720,1920x1080")
+    ap.add_argument("--dwell", type=float, default=0.4, help="seconds on each frame before the next key")
+    ap.add_argument("--sizes", default="1280x720,1920x1080,3840x2160")
+    ap.add_argument("--variants", default="page,server", help="page, server (and stack: before the page player)")
+    ap.add_argument("--loads", default="idle,busy")
     args = ap.parse_args()
-    steps = min(args.steps, args.frames - 2)
+    steps = args.steps
+    frames = steps + 10 * max(steps // 3, 3) + int(HOLD_S * 30 * 1.5) + 20
     tmp = Path(tempfile.mkdtemp(prefix="bench_labeler_"))
     rows = []
+    t_cpu = time.process_time()
     try:
         for size in args.sizes.split(","):
-            clip = make_clip(tmp, size, args.frames)
-            cold, warm = serve_times(clip, steps)
+            clip = make_clip(tmp, size, frames)
+            cold, warm = serve_times(clip, min(steps, 30))
             rows.append((size, "serve next frame, cold (decode + JPEG encode)", stats(cold)))
             rows.append((size, "serve next frame, prefetched", stats(warm)))
-            if not args.no_browser and Path(args.chromium).exists():
-                from labeler.app import FRAME_SLOTS
-
-                for slots, name in ((1, "one plane, JPEG sent on the key"), (FRAME_SLOTS, "frame stack")):
-                    st, im = browser_steps(clip, steps, args.chromium, slots, args.dwell)
-                    rows.append((size, f"key L → status line, {name}", stats(st)))
-                    rows.append((size, f"key L → new image on screen, {name}", stats(im)))
+            if args.no_browser or not Path(args.chromium).exists():
+                continue
+            for variant in args.variants.split(","):
+                for load in args.loads.split(","):
+                    with Busy(load == "busy"):
+                        r = browser_run(clip, steps, args.chromium, variant, args.dwell)
+                    tag = f"{variant}, {load}"
+                    rows.append((size, f"L → new frame on screen ({tag})", stats(r["one"])))
+                    rows.append((size, f"Shift+L → frame +10 on screen ({tag})", stats(r["ten"])))
+                    hold = (f"{r['hold_fps']:8.1f} {r['hold_lag'] * 1000:8.0f}" if "hold_fps" in r
+                            else f"{'–':>8} {'–':>8}")
+                    rows.append((size, f"hold L: frames/s shown | max lag ms ({tag})", hold))
+                    rows.append((size, f"intermediate renders | steps missed ({tag})",
+                                 f"{r['intermediate']:8d} {r['missed']:8d}"))
+                    print(f"  {size} {tag}: done", file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    print(f"labeler frame serving and step latency ({steps} steps, {args.dwell:g} s on each frame; ms; "
-          f"CPU time of this process {time.process_time():.1f} s)")
+    print(f"labeler step latency ({steps} steps, {args.dwell:g} s on each frame; ms unless named; "
+          f"CPU time of this process {time.process_time() - t_cpu:.1f} s)")
     print(f"{'clip':<10} {'what':<62} {'median':>8} {'p95':>8}")
     for size, what, figs in rows:
         print(f"{size:<10} {what:<62} {figs}")

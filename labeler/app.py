@@ -3,6 +3,11 @@
 Callbacks only change the tab's :class:`~labeler.state.LabelSession` or its requested frame and then ask the
 tab's render thread for an update; the thread renders the newest request only (auto-repeat of a step key
 coalesces), inside ``client.atomic()``, and prefetches the frames around it.
+
+Stepping happens in the page (:mod:`labeler.player_js`): the page holds the frames around the cursor, swaps
+the picture on J/L in one render and reports the frame shown; the render thread then draws that frame's
+overlays and status, and sends the frames the page asks for. Until the page's player attaches (or if it
+cannot), the thread shows each frame itself by sending its JPEG.
 """
 from __future__ import annotations
 
@@ -18,20 +23,25 @@ from inference.clipio import Clip, FormatError
 
 from .client_js import SHORTCUTS_BUTTON, install_keyboard, show_tab
 from .frames import FrameCache
-from .framestack import FrameStack
+from .frameplane import NODE, FramePlane
 from .panels.assist import populate_assist
 from .panels.ball import populate_ball
 from .panels.court import populate_court
 from .panels.events import populate_events
 from .panels.navigation import MODES, populate_navigation
 from .panels.stationary import populate_stationary
+from .player import BrowserPlayer, PlayerReport
 from .render import Overlay
 from .state import VISIBILITY_NAMES, LabelSession, clip_overview, find_clips
 from .viewer_common import ImagePlane, fit_camera, md_escape, set_slider_marks, setup_server
 
 MAX_KEYFRAME_MARKS = 40
-FRAME_SLOTS = 10
-"""Image planes per tab: the shown frame and the next ones already decoded by the browser (see framestack)."""
+PAGE_AHEAD, PAGE_BEHIND = 16, 6
+"""Frames the page keeps ready ahead of the cursor (in the stepping direction) and behind it."""
+PAGE_BUDGET_PX = 64e6
+"""Decoded pixels the page keeps as textures (≈ 256 MB: 30 frames at 1080p, 7 at 4K)."""
+PAGE_MAX_BLOBS = 400
+"""Compressed frames the page keeps (≈ 100 MB of 1080p JPEGs)."""
 
 # (label, hotkey, modifier, action name, argument): the keys avoid W/A/S/D/Q/E and the arrows (camera keys)
 HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
@@ -81,6 +91,9 @@ class ClientView:
         self.mode = "ball"
         self.pending_visibility = 1
         self.target, self.shown, self.direction = 0, -1, 1
+        self.page_goal = 0       # the page's cursor (its last report)
+        self._go: int | None = None   # a jump asked by the server (slider, events, ...) not yet sent to the page
+        self._drawn = -1         # the frame whose overlays and status were drawn last
         self.playing, self.speed = False, 1.0
         self.follow = False
         self.fit_distance: float | None = None
@@ -89,7 +102,7 @@ class ClientView:
         self._fit_lock = threading.RLock()
         self._fit_pending = True
         self._overlay_dirty = self._gui_dirty = True
-        self._preload_missing: list[int] = []
+        self._attach_sent = False
         self._closed = False
         self._cond = threading.Condition()
         self.step_times: list[float] = []  # seconds from a step request to its frame sent (for the bench)
@@ -97,7 +110,12 @@ class ClientView:
         self._detector_thread: threading.Thread | None = None
         self._shortcuts = None
 
-        self.stack = FrameStack(client.scene, self.plane, app.frame_slots, self._on_click)
+        self.frame_node = FramePlane(client.scene, self.plane, self._on_click)
+        self.player = BrowserPlayer(client, self.frames.get, self._on_report, kind="plane", node=NODE, lo=0,
+                                    hi=s.n_frames - 1, fps=float(s.fps), first=0, ahead=PAGE_AHEAD,
+                                    behind=PAGE_BEHIND, budget_px=PAGE_BUDGET_PX, max_blobs=PAGE_MAX_BLOBS,
+                                    width=s.width, height=s.height, speed=1.0, loop=False)
+        self.use_page = bool(app.page_player)
         self.overlay = Overlay(client.scene, self.plane)
 
         gui = client.gui
@@ -130,9 +148,10 @@ class ClientView:
             self._cond.notify_all()
         with warnings.catch_warnings():  # a disconnected client's handles are already gone
             warnings.simplefilter("ignore")
-            for handle in (self.folder, *self.stack.handles(), *self.overlay.handles()):
+            for remove in (self.player.remove, self.folder.remove, *(h.remove for h in self.frame_node.handles()),
+                           *(h.remove for h in self.overlay.handles())):
                 try:
-                    handle.remove()
+                    remove()
                 except Exception:
                     pass
 
@@ -143,35 +162,47 @@ class ClientView:
             self._cond.notify_all()
 
     # ------------------------------------------------------------------------------- navigation
+    @property
+    def paged(self) -> bool:
+        """Whether the page's player shows the frames (attached); else the render thread does."""
+        return self.use_page and self.player.attached
+
+    @property
+    def cursor(self) -> int:
+        """The frame being gone to: the page's cursor, or the server's target before the page attaches."""
+        return self.page_goal if self.paged else self.target
+
     def goto(self, frame: int) -> None:
         n = self.session.n_frames
         frame = n - 1 if frame < 0 else min(int(frame), n - 1)
         with self._cond:
-            if frame == self.target:
+            if frame == self.cursor and (self.paged or frame == self.target):
                 return
-            self.direction = 1 if frame >= self.target else -1
+            self.direction = 1 if frame >= self.cursor else -1
             self.target = frame
+            if self.paged:
+                self._go = frame
             self._requested_at.setdefault(frame, time.perf_counter())
             self._cond.notify_all()
         self.app.note_place(self)
 
     def step(self, delta: int) -> None:
         with self._cond:
-            target = self.target
-        self.goto(max(0, target + int(delta)))
+            cursor = self.cursor
+        self.goto(max(0, cursor + int(delta)))
 
     def next_unlabelled(self) -> None:
-        f = self.session.next_unlabelled(self.target)
+        f = self.session.next_unlabelled(self.cursor)
         if f is not None:
             self.goto(f)
 
     def jump_event(self, direction: int) -> None:
-        f = self.session.next_event(self.target, direction)
+        f = self.session.next_event(self.cursor, direction)
         if f is not None:
             self.goto(f)
 
     def next_uncertain(self) -> None:
-        f = self.session.next_uncertain(self.target)
+        f = self.session.next_uncertain(self.cursor)
         if f is None:
             self._notice("no uncertain frame: run the ball detector (Assist tab) first" if not self.session.ball_scores
                          else "no unlabelled frame where the detector is unsure")
@@ -179,7 +210,7 @@ class ClientView:
             self.goto(f)
 
     def jump_proposed_event(self) -> None:
-        later = sorted(f for f in self.session.event_proposals if f > self.target)
+        later = sorted(f for f in self.session.event_proposals if f > self.cursor)
         frames = later or sorted(self.session.event_proposals)
         if frames:
             self.goto(frames[0])
@@ -195,16 +226,24 @@ class ClientView:
         self.request(overlay=True)
 
     def set_playing(self, playing: bool) -> None:
+        """Play or pause (the page plays once attached; the server's play thread before)."""
         self.playing = playing
         if self.nav.play.value != playing:
             self.nav.play.value = playing
+        if self.paged:
+            self.player.set_playing(playing)
+
+    def set_speed(self, speed: float) -> None:
+        self.speed = float(speed)
+        if self.paged:
+            self.player.set_speed(self.speed)
 
     def toggle_play(self) -> None:
         self.set_playing(not self.playing)
 
     def _play_loop(self) -> None:
         while not self._closed:
-            if not self.playing:
+            if not self.playing or self.paged:
                 time.sleep(0.05)
                 continue
             time.sleep(1.0 / max(self.session.fps * self.speed, 1e-3))
@@ -212,6 +251,27 @@ class ClientView:
                 self.set_playing(False)
             else:
                 self.step(1)
+
+    def _on_report(self, rep: PlayerReport, first: bool) -> None:
+        """The page showed ``rep.shown`` (viser's event loop: only records it and wakes the render thread).
+
+        The first report attaches the page: it still shows the server's last picture, and goes to the server's
+        frame (a jump asked while it was attaching, e.g. a reload's return to its frame)."""
+        with self._cond:
+            if first:
+                self.page_goal = self.shown = rep.shown
+                if self.target != rep.goal:
+                    self._go = self.target
+                self._cond.notify_all()
+                return
+            self.shown, self.page_goal, self.direction = rep.shown, rep.goal, rep.direction
+            if self._go is None:
+                self.target = rep.goal
+            if rep.playing != self.playing:
+                self.playing = rep.playing
+                self._gui_dirty = True
+            self._cond.notify_all()
+        self.app.note_place(self)
 
     def set_mode(self, mode: str) -> None:
         if mode not in MODES:
@@ -490,37 +550,55 @@ class ClientView:
         self._notice(f"accepted the proposed event {label} @{self.frame}" if n else "event not accepted")
 
     # ------------------------------------------------------------------------------- rendering
+    def _work(self) -> bool:
+        """Whether the render thread has something to do (call holding ``_cond``)."""
+        if self._overlay_dirty or self._gui_dirty or self._go is not None:
+            return True
+        if self.paged:
+            return self.shown != self._drawn or self.player.has_wanted()
+        return self.target != self.shown
+
     def _render_loop(self) -> None:
         while True:
             with self._cond:
-                if not self._closed and self.target == self.shown and not (self._overlay_dirty or self._gui_dirty):
-                    self._cond.wait(timeout=0.1 if self._preload_missing else 1.0)
+                if not self._closed and not self._work():
+                    self._cond.wait(timeout=1.0)
                 if self._closed:
                     return
-                idle = self.target == self.shown and not (self._overlay_dirty or self._gui_dirty)
-                if not idle:
-                    frame, direction = self.target, self.direction
+                if not self._work():
+                    idle, go = True, None
+                else:
+                    idle, go = False, self._go
+                    self._go = None
+                    paged = self.paged
+                    frame = self.shown if paged else self.target
+                    direction = self.direction
+                    draw = self._overlay_dirty or self._gui_dirty or frame != self._drawn or \
+                        (not paged and frame != self.shown)
                     self._overlay_dirty = self._gui_dirty = False
-                    requested = self._requested_at.pop(frame, None)
-                    self._requested_at.clear()
+                    requested = self._requested_at.pop(frame, None) if draw else None
+                    if draw:
+                        self._requested_at.clear()
             if idle:  # outside the condition: syncing takes the session lock (lock order: session, then cond)
-                self._preload()
                 self._sync_from_disk()
                 continue
-            try:
-                self._render(frame, direction)
-            except Exception as e:  # a failing frame is reported, the labeler goes on
-                self._notice(f"⚠ could not show frame {frame}: {e}")
-                self.shown = frame
-            if requested is not None:
-                self.step_times.append(time.perf_counter() - requested)
-
-    def _preload(self) -> None:
-        """Send the frames around the shown one that the cache has decoded meanwhile to the planes behind."""
-        if not self._preload_missing or self.stack.slots < 2:
-            return
-        with self.lock, self.client.atomic():
-            self._preload_missing = self.stack.preload(self._preload_missing, self.frames.peek)
+            if go is not None:
+                self.player.goto(go)
+            if draw and frame >= 0:
+                try:
+                    self._render(frame, direction, paged)
+                except Exception as e:  # a failing frame is reported, the labeler goes on
+                    self._notice(f"⚠ could not show frame {frame}: {e}")
+                    self.shown = self._drawn = frame
+                if requested is not None:
+                    self.step_times.append(time.perf_counter() - requested)
+            elif paged:
+                try:
+                    self.player.send_next()
+                except Exception as e:
+                    self._notice(f"⚠ could not send a frame to the page: {e}")
+                    with self.player._lock:
+                        self.player._want.clear()
 
     def _sync_from_disk(self) -> None:
         with self.lock:
@@ -529,24 +607,23 @@ class ClientView:
             except Exception as e:
                 self.session.notices.append(f"⚠ could not re-read the clip files: {e}")
 
-    def _wanted(self, frame: int, direction: int) -> list[int]:
-        """Frames to hold in the browser after ``frame``: ahead in the stepping direction first, then one behind."""
-        n, k = self.session.n_frames, self.stack.slots - 1
-        ahead = [frame + direction * i for i in range(1, max(k - 1, 1) + 1)]
-        return [f for f in [*ahead, frame - direction] if 0 <= f < n][:k]
-
-    def _render(self, frame: int, direction: int) -> None:
+    def _render(self, frame: int, direction: int, paged: bool) -> None:
+        """Draw ``frame``'s overlays and status; show its picture too unless the page shows it."""
         with self.lock, self.client.atomic():
-            if frame != self.shown:
-                self.stack.show(frame, self.frames.get)
-            if self.stack.slots > 1:
-                self._preload_missing = self.stack.preload(self._wanted(frame, direction), self.frames.peek)
+            if not paged:
+                self.frame_node.show(frame, self.frames.get)
             self.overlay.draw(self.session, frame, mode=self.mode, trail_length=int(self.ball_panel.trail.value),
                               show_court=bool(self.court_panel.show.value) or self.mode == "court",
                               selected_point=str(self.court_panel.point.value) if self.mode == "court" else None)
             self._refresh_gui(frame)
-        self.shown = frame
+        if not paged:
+            self.shown = frame
+        self._drawn = frame
         self.client.flush()
+        if self.use_page and not self.player.attached and not self._attach_sent:
+            self._attach_sent = True   # the node has its first picture: the page's player can take it over
+            self.player.config["first"] = frame
+            self.player.attach()
         if self.follow:
             self._follow_ball(frame)
         self.frames.prefetch(frame, direction)
@@ -557,6 +634,8 @@ class ClientView:
         nav = self.nav
         if int(nav.slider.value) != frame:
             nav.slider.value = frame
+        if bool(nav.play.value) != self.playing:
+            nav.play.value = self.playing
         row = s.ball.get(frame)
         ball = "not labelled" if row is None else VISIBILITY_NAMES[row[0]]
         if row is not None and row[0] > 0:
@@ -705,11 +784,11 @@ class LabelerApp:
     Args:
         target: a clip folder, or a dataset (``manifest.yaml`` or clip sub-folders).
         host, port: where viser listens.
-        frame_slots: image planes per tab (1 sends every frame when shown; more keep the next frames in the
-            browser, see :mod:`labeler.framestack`).
+        page_player: let the page hold the frames and step (:mod:`labeler.player_js`); False: the server
+            sends each frame's JPEG when it is shown (the fallback when the page's player cannot attach).
     """
 
-    def __init__(self, target: str | Path, host: str = "127.0.0.1", port: int = 8080, frame_slots: int = FRAME_SLOTS):
+    def __init__(self, target: str | Path, host: str = "127.0.0.1", port: int = 8080, page_player: bool = True):
         import viser
 
         self.clips = find_clips(target)
@@ -718,7 +797,7 @@ class LabelerApp:
         # beyond this machine the pages show paths relative to the dataset (a clip: its folder's parent)
         self.shown_base: Path | None = None if host in LOCAL_HOSTS else \
             (dataset.parent if len(self.clips) == 1 and self.clips[0].root.resolve() == dataset.resolve() else dataset)
-        self.frame_slots = int(frame_slots)
+        self.page_player = bool(page_player)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         setup_server(self.server)
         self._caches: dict[Path, FrameCache] = {}
@@ -775,7 +854,7 @@ class LabelerApp:
         """Remember where ``view`` is (its clip, frame and mode): a page opened or reloaded next returns
         there (noted on every step and mode change: a reload's new tab may connect before the old one has
         gone)."""
-        self.last_place = Place(view.clip.root.resolve(), int(view.target), view.mode)
+        self.last_place = Place(view.clip.root.resolve(), int(view.cursor), view.mode)
 
     def _disconnect(self, client) -> None:
         view = self.views.pop(client.client_id, None)

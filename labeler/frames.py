@@ -20,11 +20,42 @@ from inference.clipio import Clip, FrameSource
 from .viewer_common import encode_jpeg
 
 
+FRAME_CODE_BITS = 16
+"""Bits of the frame code burned under the number (frames 0..65535)."""
+
+
+def frame_code_layout(width: int) -> tuple[int, int, int]:
+    """``(x0, y0, cell)``: where the frame code's first cell starts in a ``width``-pixel-wide frame, and the
+    cell size (px). The cells run right from ``x0``; cell ``k`` (``k = 0`` the most significant bit) is white
+    for a 1, black for a 0. The size grows with the frame so that a cell stays ≥ 5 screen pixels when the
+    whole frame is fitted into a browser canvas."""
+    scale = max(0.4, width / 1600)
+    cell = max(4, int(round(width / 200)))
+    pad = int(4 * scale) + 2
+    th = int(round(22 * scale)) + 2 * pad
+    return pad, th, cell
+
+
+def code_cell_centres(width: int) -> np.ndarray:
+    """``(FRAME_CODE_BITS, 2)`` pixel centres of the frame code's cells (see :func:`frame_code_layout`)."""
+    x0, y0, cell = frame_code_layout(width)
+    k = np.arange(FRAME_CODE_BITS)
+    return np.stack([x0 + (k + 0.5) * cell, np.full(len(k), y0 + 0.5 * cell)], axis=1)
+
+
+def read_frame_code(levels: np.ndarray) -> int:
+    """The frame number from the grey levels ``(FRAME_CODE_BITS,)`` sampled at :func:`code_cell_centres`."""
+    bits = (np.asarray(levels, float) > 127).astype(int)
+    return int(sum(int(b) << (FRAME_CODE_BITS - 1 - k) for k, b in enumerate(bits)))
+
+
 def stamp_frame_number(rgb: np.ndarray, index: int) -> np.ndarray:
-    """A copy of ``rgb (H, W, 3)`` with ``#index`` in a dark box at its top-left corner.
+    """A copy of ``rgb (H, W, 3)`` with ``#index`` and its binary code in a dark box at its top-left corner.
 
     The number travels with the picture, so what the annotator reads is the frame on screen even while the
-    browser is still decoding the next one (the status line may already name it).
+    browser is still decoding the next one (the status line may already name it). The code under it
+    (:func:`code_cell_centres`, :func:`read_frame_code`) lets a test or benchmark read the frame on screen
+    from the canvas pixels.
     """
     import cv2
 
@@ -34,9 +65,14 @@ def stamp_frame_number(rgb: np.ndarray, index: int) -> np.ndarray:
     thick = max(1, int(round(scale * 2)))
     text = f"#{index}"
     (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
-    pad = int(4 * scale) + 2
-    img[: th + base + 2 * pad, : tw + 2 * pad] //= 4
+    x0, y0, cell = frame_code_layout(w)
+    pad = x0
+    img[: y0 + cell + pad, : max(tw, FRAME_CODE_BITS * cell) + 2 * pad] //= 4
     cv2.putText(img, text, (pad, pad + th), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), thick, cv2.LINE_AA)
+    value = int(index) % (1 << FRAME_CODE_BITS)
+    for k in range(FRAME_CODE_BITS):
+        bit = (value >> (FRAME_CODE_BITS - 1 - k)) & 1
+        img[y0: y0 + cell, x0 + k * cell: x0 + (k + 1) * cell] = 255 if bit else 0
     return img
 
 

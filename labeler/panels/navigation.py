@@ -49,7 +49,7 @@ def populate_navigation(gui, view) -> NavigationPanel:
 
     steps.on_click(on_step)
     play.on_update(lambda ev: view.set_playing(bool(play.value)))
-    speed.on_update(lambda ev: setattr(view, "speed", float(speed.value)))
+    speed.on_update(lambda ev: view.set_speed(float(speed.value)))
 
     def on_history(ev) -> None:
         {"undo": view.undo, "redo": view.redo, "fit view": view.fit}[history.value]()

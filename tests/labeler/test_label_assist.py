@@ -1,9 +1,12 @@
 """The labeler's pieces without a browser: escaping of file-derived text, the in-page error and the cheat-sheet,
-the frame number burned into each picture, the frame stack, detector-driven navigation and colours, proposed
+the frame number and code burned into each picture, the page player's reports, detector-driven navigation and colours, proposed
 events and the next court point."""
 from __future__ import annotations
 
 import html
+import json
+
+import cv2
 
 import numpy as np
 import pytest
@@ -12,11 +15,11 @@ from label_helpers import copy_sample
 from inference.clipio import Clip, FormatError
 from inference.clipio.tables import BallTrack, HitEvents
 from labeler.app import error_markdown, shortcuts_markdown
-from labeler.frames import stamp_frame_number
-from labeler.framestack import BACK_SCALE, FrameStack
+from labeler.frames import code_cell_centres, read_frame_code, stamp_frame_number
+from labeler.player import PlayerReport
 from labeler.render import COLORS, confidence_color
 from labeler.state import LabelSession
-from labeler.viewer_common import ImagePlane, md_escape
+from labeler.viewer_common import md_escape
 
 HOSTILE = '<iframe srcdoc="<script>parent.x=1</script>">|**b**'
 
@@ -57,46 +60,26 @@ def test_frame_number_is_burned_into_the_top_left_only():
     np.testing.assert_array_equal(a[60:], img[60:])
 
 
-class FakeNode:
-    def __init__(self, position, scale):
-        self.position, self.scale = position, scale
-        self._data = None
-
-    def on_click(self, fn):
-        return fn
-
-    def on_drag(self, button):
-        return lambda fn: fn
-
-
-class FakeScene:
-    def __init__(self):
-        self.nodes = []
-
-    def add_image(self, name, img, render_width, render_height, format, position, scale):
-        self.nodes.append(FakeNode(position, scale))
-        return self.nodes[-1]
+@pytest.mark.parametrize("size", [(640, 360), (1280, 720), (1920, 1080), (3840, 2160)])
+def test_frame_code_reads_back_after_jpeg(size):
+    """The binary code burned under the frame number survives JPEG and is read at the cell centres."""
+    w, h = size
+    rng = np.random.default_rng(0)
+    picture = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)  # worst case: noise right beside the code
+    for index in (0, 1, 6, 241, 4095, 65535):
+        ok, buf = cv2.imencode(".jpg", stamp_frame_number(picture, index), [cv2.IMWRITE_JPEG_QUALITY, 80])
+        img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        c = np.round(code_cell_centres(w)).astype(int)
+        assert read_frame_code(img[c[:, 1], c[:, 0]].mean(axis=1)) == index
 
 
-def test_frame_stack_shows_a_prefetched_frame_without_sending_it_again():
-    stack = FrameStack(FakeScene(), ImagePlane(1280, 720), 4, on_click=lambda ev: None)
-    sent = []
-
-    def jpeg(i):
-        sent.append(i)
-        return f"jpeg{i}".encode()
-
-    stack.show(0, jpeg)
-    assert stack.preload([1, 2, 3, 4], jpeg) == []  # three planes behind the front one: 4 does not fit
-    assert sent == [0, 1, 2, 3]
-    front_before = stack.front
-    stack.show(2, jpeg)
-    assert sent == [0, 1, 2, 3] and stack.shown == 2 and stack.front != front_before
-    assert stack.nodes[stack.front].position[2] == 0.0  # in front; the others behind it
-    assert stack.nodes[stack.front].scale == 1.0
-    assert all(n.position[2] > 0 and n.scale == BACK_SCALE for i, n in enumerate(stack.nodes) if i != stack.front)
-    assert stack.nodes[stack.front]._data == b"jpeg2"
-    assert stack.preload([5], lambda i: None) == [5]  # not decoded yet: reported missing, nothing sent
+def test_player_report_parsing_rejects_what_the_page_would_never_send():
+    good = {"seq": 3, "token": "abc", "shown": 5, "goal": 6, "dir": -1, "playing": False, "want": [6, 7, 900, -1]}
+    rep = PlayerReport.parse(json.dumps(good), 0, 239)
+    assert rep == PlayerReport(3, "abc", 5, 6, -1, False, (6, 7))  # frames outside the clip are dropped
+    for bad in ("", "[]", "{", json.dumps({**good, "shown": 240}), json.dumps({**good, "goal": "x"}),
+                json.dumps({k: v for k, v in good.items() if k != "want"})):
+        assert PlayerReport.parse(bad, 0, 239) is None
 
 
 def test_next_uncertain_frame_and_confidence_colours(clip_dir):

@@ -1,0 +1,131 @@
+"""The server side of the page's frame player (:mod:`labeler.player_js`): attach, reports, frames on request.
+
+One :class:`BrowserPlayer` per browser tab. It adds a hidden text field to the tab's GUI, through which the
+page sends its reports (:class:`PlayerReport`: the frame shown, the cursor, the frames it lacks); it answers
+by sending those frames, compressed, one call at a time (:meth:`BrowserPlayer.send_next`), so that a newer
+report can reorder the queue between two frames. Until the page's first report the player is not
+``attached`` and its owner shows frames the old way (a JPEG per step through viser's image node).
+"""
+from __future__ import annotations
+
+import json
+import threading
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from .player_js import call_player, install_player, put_frame_js, queue_js
+
+MAX_WANT = 32
+"""Frames one report may ask for (the page asks for at most 8 at a time)."""
+
+
+@dataclass(frozen=True)
+class PlayerReport:
+    """One report of the page (see :mod:`labeler.player_js`).
+
+    Attributes:
+        seq: the page's report counter; token: the player's token (reports of an older clip are ignored);
+        shown: the frame on screen; goal: the frame the page is going to (= shown unless still decoding);
+        direction: +1 / -1, the last stepping direction; playing: the page is playing;
+        want: frames the page lacks around its cursor, most wanted first.
+    """
+
+    seq: int
+    token: str
+    shown: int
+    goal: int
+    direction: int
+    playing: bool
+    want: tuple[int, ...]
+
+    @classmethod
+    def parse(cls, text: str, lo: int, hi: int) -> PlayerReport | None:
+        """A report from the page's JSON, frames checked against ``lo..hi``; None for anything malformed."""
+        try:
+            d = json.loads(text)
+            rep = cls(int(d["seq"]), str(d["token"]), int(d["shown"]), int(d["goal"]),
+                      1 if int(d["dir"]) >= 0 else -1, bool(d["playing"]),
+                      tuple(int(f) for f in d["want"][:MAX_WANT] if lo <= int(f) <= hi))
+        except (ValueError, TypeError, KeyError, AttributeError):
+            return None
+        if not (lo <= rep.shown <= hi and lo <= rep.goal <= hi):
+            return None
+        return rep
+
+
+class BrowserPlayer:
+    """The frame feed of one tab.
+
+    Args:
+        client: the viser client (its page runs :data:`labeler.player_js.PLAYER_JS`).
+        jpeg: ``jpeg(frame) -> bytes``, the compressed frame to send.
+        on_report: ``on_report(report, first)`` with each new :class:`PlayerReport` on viser's event loop (must
+            not block); ``first`` for the report that attaches the page.
+        config: the page's configuration (see ``P.attach`` in the script), without token and channel.
+    """
+
+    def __init__(self, client, jpeg: Callable[[int], bytes], on_report: Callable[[PlayerReport, bool], None],
+                 **config):
+        self.client = client
+        self.jpeg = jpeg
+        self.on_report = on_report
+        self.config = dict(config)
+        self.lo, self.hi = int(config["lo"]), int(config["hi"])
+        self.token = uuid.uuid4().hex[:12]
+        self.attached = False
+        self.last: PlayerReport | None = None
+        self.sent = 0
+        self._want: list[int] = []
+        self._lock = threading.Lock()
+        self.channel = client.gui.add_text("frame player", "", visible=False, order=1000)
+        self.channel.on_update(self._on_channel)
+
+    def attach(self) -> None:
+        """Install the script in the page and attach it to this tab's frames."""
+        install_player(self.client)
+        call_player(self.client, "attach", {**self.config, "token": self.token, "channel": self.channel._impl.uuid})
+        self.client.flush()
+
+    async def _on_channel(self, _ev) -> None:  # awaited in order on viser's event loop: before a later click
+        rep = PlayerReport.parse(str(self.channel.value), self.lo, self.hi)
+        if rep is None or rep.token != self.token or (self.last is not None and rep.seq <= self.last.seq):
+            return
+        first = self.last is None
+        self.attached = True
+        self.last = rep
+        with self._lock:
+            self._want = list(rep.want)
+        self.on_report(rep, first)
+
+    def has_wanted(self) -> bool:
+        with self._lock:
+            return bool(self._want)
+
+    def send_next(self) -> int | None:
+        """Send the most wanted frame the page lacks; returns it (None when nothing is wanted)."""
+        with self._lock:
+            if not self._want:
+                return None
+            frame = self._want.pop(0)
+        queue_js(self.client, put_frame_js(self.token, frame, self.jpeg(frame)))
+        self.client.flush()
+        self.sent += 1
+        return frame
+
+    def _call(self, method: str, *args) -> None:
+        call_player(self.client, method, *args)
+        self.client.flush()
+
+    def goto(self, frame: int) -> None:
+        self._call("goto", int(frame))
+
+    def set_playing(self, playing: bool) -> None:
+        self._call("setPlaying", bool(playing))
+
+    def set_speed(self, speed: float) -> None:
+        self._call("setSpeed", float(speed))
+
+    def remove(self) -> None:
+        call_player(self.client, "reset")
+        self.channel.remove()
