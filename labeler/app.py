@@ -267,7 +267,7 @@ class ClientView:
             self.shown, self.page_goal, self.direction = rep.shown, rep.goal, rep.direction
             if self._go is None:
                 self.target = rep.goal
-            if rep.playing != self.playing:
+            if rep.playing != self.playing and self.player.follows_commands(rep):
                 self.playing = rep.playing
                 self._gui_dirty = True
             self._cond.notify_all()

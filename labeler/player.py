@@ -28,7 +28,8 @@ class PlayerReport:
         seq: the page's report counter; token: the player's token (reports of an older clip are ignored);
         shown: the frame on screen; goal: the frame the page is going to (= shown unless still decoding);
         direction: +1 / -1, the last stepping direction; playing: the page is playing;
-        want: frames the page lacks around its cursor, most wanted first.
+        want: frames the page lacks around its cursor, most wanted first;
+        cmd: the number of the server's last play / pause command the page had received.
     """
 
     seq: int
@@ -38,6 +39,7 @@ class PlayerReport:
     direction: int
     playing: bool
     want: tuple[int, ...]
+    cmd: int = 0
 
     @classmethod
     def parse(cls, text: str, lo: int, hi: int) -> PlayerReport | None:
@@ -46,7 +48,7 @@ class PlayerReport:
             d = json.loads(text)
             rep = cls(int(d["seq"]), str(d["token"]), int(d["shown"]), int(d["goal"]),
                       1 if int(d["dir"]) >= 0 else -1, bool(d["playing"]),
-                      tuple(int(f) for f in d["want"][:MAX_WANT] if lo <= int(f) <= hi))
+                      tuple(int(f) for f in d["want"][:MAX_WANT] if lo <= int(f) <= hi), int(d.get("cmd", 0)))
         except (ValueError, TypeError, KeyError, AttributeError):
             return None
         if not (lo <= rep.shown <= hi and lo <= rep.goal <= hi):
@@ -76,6 +78,7 @@ class BrowserPlayer:
         self.attached = False
         self.last: PlayerReport | None = None
         self.sent = 0
+        self.cmd = 0  # the number of the last play / pause command sent
         self._want: list[int] = []
         self._lock = threading.Lock()
         self.channel = client.gui.add_text("frame player", "", visible=False, order=1000)
@@ -94,8 +97,8 @@ class BrowserPlayer:
         first = self.last is None
         self.attached = True
         self.last = rep
-        with self._lock:
-            self._want = list(rep.want)
+        with self._lock:  # the new wants first, then those of earlier reports not sent yet (asked for once)
+            self._want = list(dict.fromkeys([*rep.want, *self._want]))[:4 * MAX_WANT]
         self.on_report(rep, first)
 
     def has_wanted(self) -> bool:
@@ -121,7 +124,13 @@ class BrowserPlayer:
         self._call("goto", int(frame))
 
     def set_playing(self, playing: bool) -> None:
-        self._call("setPlaying", bool(playing))
+        self.cmd += 1
+        self._call("setPlaying", bool(playing), self.cmd)
+
+    def follows_commands(self, rep: PlayerReport) -> bool:
+        """Whether ``rep`` was sent after the page received the last play / pause command (its ``playing``
+        is then the page's own doing, e.g. a held key, and not a command still on its way)."""
+        return rep.cmd >= self.cmd
 
     def set_speed(self, speed: float) -> None:
         self._call("setSpeed", float(speed))

@@ -114,12 +114,23 @@ PLAYER_JS = r"""
     P.prepare();
   };
   // frames wanted around the cursor, most wanted first: the cursor, then ahead in the direction, one behind, ...
+  // while playing: the frames from a little ahead of the clock (those due now arrive late) to `ahead`, then
+  // those due now, then those between the frame shown and the clock (late, but shown if they come first)
+  const LEAD = 4;
   P.window = () => {
     const c = P.cfg, d = P.dir >= 0 ? 1 : -1, g = P.goal;
-    const out = [g];
-    for (let k = 1; k <= Math.max(c.ahead, c.behind); k++) {
-      if (k <= c.ahead) out.push(g + d * k);
-      if (k <= c.behind) out.push(g - d * k);
+    let out = [];
+    if (P.playing) {
+      for (let k = LEAD; k <= c.ahead; k++) out.push(g + d * k);
+      for (let k = 0; k < LEAD; k++) out.push(g + d * k);
+      for (let f = g - d; (f - P.shown) * d > 0; f -= d) out.push(f);
+      if (c.loop && d > 0) out = out.map((f) => (f > c.hi ? c.lo + (f - c.hi - 1) % (c.hi - c.lo + 1) : f));
+    } else {
+      out.push(g);
+      for (let k = 1; k <= Math.max(c.ahead, c.behind); k++) {
+        if (k <= c.ahead) out.push(g + d * k);
+        if (k <= c.behind) out.push(g - d * k);
+      }
     }
     return out.filter((f) => f >= c.lo && f <= c.hi);
   };
@@ -127,6 +138,7 @@ PLAYER_JS = r"""
     if (!P.cfg) return;
     const order = P.window();
     const keep = new Set(order.slice(0, P.maxDecoded));
+    if (P.current) keep.add(P.current.f);
     // forget decoded frames far from the cursor, then compressed ones beyond the budget
     for (const e of P.entries.values()) if ((e.tex || e.bitmap) && !keep.has(e.f)) P.drop(e, false);
     if (P.entries.size > P.cfg.max_blobs) {
@@ -136,7 +148,8 @@ PLAYER_JS = r"""
         P.drop(e, true); P.entries.delete(e.f);
       }
     }
-    for (const f of order) {
+    const soonest = P.playing ? Array.from(keep).sort((a, b) => (a - b) * P.dir) : order;
+    for (const f of soonest) {
       if (P.decoding >= 2) break;
       if (!keep.has(f)) break;
       const e = P.entries.get(f);
@@ -149,7 +162,7 @@ PLAYER_JS = r"""
     const token = P.token;
     const flip = P.cfg.kind === "plane";  // WebGL does not flip ImageBitmaps on upload: flip while decoding
     createImageBitmap(e.blob, flip ? {imageOrientation: "flipY"} : {}).then((bm) => {
-      e.loading = false; P.decoding -= 1;
+      e.loading = false; P.decoding -= 1; P.decoded = (P.decoded || 0) + 1;
       if (token !== P.token || !P.entries.has(e.f)) { bm.close(); return; }
       e.bitmap = bm;
       if (P.cfg.kind === "plane") {
@@ -163,7 +176,7 @@ PLAYER_JS = r"""
       }
       if (e.f === P.goal && P.shown !== e.f && !P.playing) P.show(e.f);
       P.prepare();
-    }, () => { e.loading = false; P.decoding -= 1; e.blob = null; P.prepare(); });
+    }, (err) => { e.loading = false; P.decoding -= 1; e.blob = null; P.failed = String(err); P.prepare(); });
   };
 
   // ------------------------------------------------------------------------------------ the cursor
@@ -199,7 +212,12 @@ PLAYER_JS = r"""
     P.playing = null; P.goal = P.shown;
     P.report(true);
   };
-  P.setPlaying = (on) => { if (on && !P.playing) P.play(1, P.speed); else if (!on) P.stop(); };
+  // the server's play / pause, numbered: reports say which command they follow (the server ignores the
+  // `playing` of reports sent before its latest command arrived)
+  P.setPlaying = (on, cmd) => {
+    if (cmd) P.cmd = cmd;
+    if (on && !P.playing) P.play(1, P.speed); else if (!on) P.stop(); else P.report(true);
+  };
   P.setSpeed = (s) => { P.speed = s; if (P.playing) P.play(P.playing.dir, s); };
   P.tick = () => {
     const pl = P.playing;
@@ -238,7 +256,7 @@ PLAYER_JS = r"""
     let inflight = 0;
     for (const [f, at] of P.requested) { if (t - at > 3000) P.requested.delete(f); else inflight += 1; }
     for (const f of P.window()) {
-      if (inflight + want.length >= 8) break;
+      if (inflight + want.length >= (P.playing ? 2 * P.cfg.ahead : 8)) break;
       const e = P.entries.get(f);
       if ((e && e.blob) || P.requested.has(f)) continue;
       want.push(f); P.requested.set(f, t);
@@ -247,7 +265,7 @@ PLAYER_JS = r"""
     if (!m) return;
     P.seq += 1;
     const msg = {seq: P.seq, token: P.token, shown: P.shown, goal: P.goal, dir: P.dir,
-                 playing: !!P.playing, want: want};
+                 playing: !!P.playing, cmd: P.cmd || 0, want: want};
     m.sendMessage({type: "GuiUpdateMessage", uuid: P.cfg.channel, updates: {value: JSON.stringify(msg)}});
   };
 
@@ -297,6 +315,14 @@ PLAYER_JS = r"""
       canvas.style.cssText = "max-width:100%;height:auto;display:block";
       img.parentElement.insertBefore(canvas, img);
     }
+    let caption = img.parentElement.querySelector("div.r3d-caption");
+    if (!caption) {
+      caption = document.createElement("div");
+      caption.className = "r3d-caption";
+      caption.style.cssText = "font-weight:600;font-size:0.9em;padding:0 0 0.3em 0";
+      img.parentElement.insertBefore(caption, canvas);
+    }
+    P.caption = caption;
     canvas.width = cfg.width; canvas.height = cfg.height;
     img.style.display = "none";
     let mesh = null;  // viser sets the node's own visibility every render: hide and show the mesh inside
@@ -311,6 +337,7 @@ PLAYER_JS = r"""
     if (xyz) { P.ball.position.set(xyz[0], xyz[1], xyz[2]); P.ballMesh.visible = true; }
     else P.ballMesh.visible = false;
     P.shown3d = e.f;
+    P.caption.textContent = "frame " + e.f + P.cfg.caption;
     P.render();
   };
 })();

@@ -3,8 +3,13 @@
 Shared by every viewer (``server.scene``): the court, the whole path, the contact markers. Per viewer
 (``client.scene`` / ``client.gui``, a :class:`Session`): the moving ball and its trail, the players, the
 timeline with its own play/pause and speed, the camera presets, the video frame with the reprojection drawn
-over it, and the shot panel, under a banner with the clip's 3D status (red when it is not plausible). One
-background thread advances every playing session.
+over it, and the shot panel, under a banner with the clip's 3D status (red when it is not plausible).
+
+Playback runs in the page (:mod:`labeler.player_js`): one clock there picks the video frame to draw (the
+newest one decoded, frames not ready are dropped) and moves the 3D ball to that same frame in the same
+animation frame, so under load video and 3D skip together. The page reports the frame shown; one background
+thread then updates the server-drawn parts of every session (trail, players, shot text, timeline). Until the
+page's player attaches, that thread advances playing sessions and sends the video frame itself.
 
 Example (non-blocking, e.g. in tests or ``make demo``)::
 
@@ -36,10 +41,18 @@ from .panels import (
 )
 from .playback import Playback
 from .scene import TRAIL_FRAMES, PlayerNodes, add_ball, apply_pose, camera_presets, update_ball
+
+from ..frames import stamp_frame_number
+from ..player import BrowserPlayer, PlayerReport
+from ..viewer_common import encode_jpeg
 from .shots import shots_csv_text
 
 VIDEO_WIDTH = 960
 """Width (px) of the video frame sent to the page (the panel beside the 3D view scales it to its width)."""
+PAGE_AHEAD = 24
+"""Video frames the page keeps decoded ahead of its clock."""
+PAGE_BUDGET_PX = 32e6
+"""Decoded video pixels the page keeps (≈ 60 frames of 960×540)."""
 
 
 class FrameImages:
@@ -72,8 +85,8 @@ class FrameImages:
                 base = placeholder_frame(d.camera, self.width)
             obs = d.uv[frame] if frame < len(d.uv) else None
             img = draw_overlay(base, d.camera, d.court, ball_xyz=d.ball_at(frame),
-                               trail_xyz=d.trail(frame, TRAIL_FRAMES), observed_px=obs, out_width=self.width,
-                               text=f"frame {frame}")
+                               trail_xyz=d.trail(frame, TRAIL_FRAMES), observed_px=obs, out_width=self.width)
+            img = stamp_frame_number(img, frame)  # the number, and its code that tests read from the page
             self._cache[frame] = img
             self._order.append(frame)
             if len(self._order) > self._cache_size:
@@ -101,13 +114,44 @@ class Session:
         self.banner = populate_banner(gui, d.analysis.plausibility)  # first: the 3D status before any figure
         self.panel = populate_playback(gui, d.first_frame, d.last_frame, d.event_marks())
         self.views = populate_cameras(gui, list(self.presets))
-        self.info = populate_info(gui, app.frames.get(self.playback.frame), d.analysis, d.summary())
+        first = app.frames.get(self.playback.frame)
+        self.info = populate_info(gui, first, d.analysis, d.summary())
         self.dl_replay, self.dl_csv = populate_export(gui)
         self._syncing = False
-        self.shown = -1  # the frame whose ball and video were last sent together
+        self.shown = -1  # the frame whose ball and video were last shown together
+        self._drawn = -1  # the frame whose trail, players and shot text were drawn last (page playback)
+        self._attached_now = False
+        ball = [d.ball_at(f) for f in range(d.first_frame, d.last_frame + 1)]
+        self.player = BrowserPlayer(
+            client, self._jpeg, self._on_report, kind="review", lo=d.first_frame, hi=d.last_frame, fps=float(d.fps),
+            first=d.first_frame, ahead=PAGE_AHEAD, behind=4, budget_px=PAGE_BUDGET_PX, max_blobs=10_000,
+            width=int(first.shape[1]), height=int(first.shape[0]), speed=1.0, loop=True, ball="/live/ball",
+            offset=d.first_frame, ball_xyz=[[round(float(v), 4) for v in p] if np.isfinite(p).all() else None
+                                            for p in ball],
+            caption=" (3D view and video)")
         self._wire()
         apply_pose(client, self.presets["broadcast"])
         self.render()
+        self.player.attach()
+
+    @property
+    def paged(self) -> bool:
+        """Whether the page's player plays (attached); else the server's thread does."""
+        return self.player.attached
+
+    def _jpeg(self, frame: int) -> bytes:
+        return encode_jpeg(self.app.frames.get(frame), 80)
+
+    def _on_report(self, rep: PlayerReport, first: bool) -> None:
+        """The page showed ``rep.shown`` (viser's event loop: only records it; :meth:`tick` draws the rest)."""
+        with self.lock:
+            if first:
+                self._attached_now = True  # the rest in tick(): this runs on viser's event loop
+                return
+            self.playback.seek(rep.shown)
+            if self.player.follows_commands(rep):
+                self.playback.playing = rep.playing
+            self.shown = rep.shown
 
     def _wire(self) -> None:
         p = self.panel
@@ -122,13 +166,16 @@ class Session:
 
         @p.play.on_update
         def _(_ev) -> None:
-            with self.lock:
-                self.playback.playing = bool(p.play.value)
+            if self._syncing:
+                return
+            self._play(bool(p.play.value))
 
         @p.speed.on_update
         def _(_ev) -> None:
             with self.lock:
                 self.playback.set_speed(speed_of(p.speed.value))
+            if self.paged:
+                self.player.set_speed(self.playback.speed)
 
         @p.prev.on_click
         def _(ev) -> None:
@@ -157,8 +204,15 @@ class Session:
         def _(_ev) -> None:
             self._set_play(not self.playback.playing)
 
+    def _play(self, playing: bool) -> None:
+        with self.lock:
+            self.playback.playing = playing
+        if self.paged:
+            self.player.set_playing(playing)
+
     def _set_play(self, playing: bool) -> None:
-        self.playback.playing = playing
+        """Play or pause, and show it in the checkbox (without its callback)."""
+        self._play(playing)
         self._syncing = True
         try:
             self.panel.play.value = playing
@@ -166,7 +220,30 @@ class Session:
             self._syncing = False
 
     def tick(self, dt: float) -> None:
-        """Advance when playing and redraw if the frame changed."""
+        """Page playback: draw the server's parts for the frame the page reported. Before the page attaches:
+        advance when playing and redraw if the frame changed."""
+        if self.paged:
+            if self._attached_now:
+                self._attached_now = False
+                self.nodes.ball.visible = True  # the page shows and hides the ball's mesh from now on
+                self.info.frame.content = ""    # the page writes the caption under its clock
+                self.player.goto(self.playback.frame)
+                if self.playback.playing:
+                    self.player.set_playing(True)
+            for _ in range(8):  # the video frames the page asked for
+                if self.player.send_next() is None:
+                    break
+            with self.lock:
+                frame, playing = self.playback.frame, self.playback.playing
+            if frame != self._drawn:
+                self._draw_server_parts(frame)
+            if bool(self.panel.play.value) != playing:
+                self._syncing = True
+                try:
+                    self.panel.play.value = playing
+                finally:
+                    self._syncing = False
+            return
         with self.lock:
             was_playing = self.playback.playing
             before = self.playback.frame
@@ -177,10 +254,29 @@ class Session:
         if ended:  # stopped at the end (no loop): only then uncheck the box, never a click still on its way
             self._set_play(False)
 
+    def _draw_server_parts(self, f: int, from_slider: bool = False) -> None:
+        d = self.app.data
+        with self.client.atomic():
+            update_ball(self.nodes, d.ball_at(f), d.trail(f, TRAIL_FRAMES), move_ball=False)
+            self.players.update(d.players_at(f))
+        self.info.current.content = current_shot_markdown(d.analysis, f)
+        self._drawn = f
+        if not from_slider:
+            self._syncing = True
+            try:
+                self.panel.frame.value = f
+            finally:
+                self._syncing = False
+
     def render(self, from_slider: bool = False) -> None:
-        """Show the current frame: ball, trail, players, video overlay, shot text, slider position."""
+        """Show the current frame: ball, trail, players, video overlay, shot text, slider position (once the
+        page's player is attached: ask the page to go there; it draws video and ball, then reports)."""
         d = self.app.data
         f = self.playback.frame
+        if self.paged:
+            self.player.goto(f)
+            self._draw_server_parts(f, from_slider)
+            return
         image = self.app.frames.get(f)  # decoded before the batch: 3D and video leave together
         with self.client.atomic():
             update_ball(self.nodes, d.ball_at(f), d.trail(f, TRAIL_FRAMES))
@@ -188,6 +284,7 @@ class Session:
             self.info.video.image = image
             self.info.frame.content = f"**frame {f}** (3D view and video)"
             self.shown = f
+        self._drawn = f
         self.info.current.content = current_shot_markdown(d.analysis, f)
         if not from_slider:
             self._syncing = True

@@ -240,9 +240,12 @@ def trail_segments(xyz: np.ndarray, bg=(235, 235, 235)) -> tuple[np.ndarray, np.
     return segs, np.stack([cols[:-1], cols[1:]], axis=1)
 
 
-def update_ball(nodes: BallNodes, xyz: np.ndarray, trail_xyz: np.ndarray) -> None:
-    """Move the ball to ``xyz`` (hidden when NaN) and redraw the trail."""
-    if np.isfinite(xyz).all():
+def update_ball(nodes: BallNodes, xyz: np.ndarray, trail_xyz: np.ndarray, *, move_ball: bool = True) -> None:
+    """Move the ball to ``xyz`` (hidden when NaN) and redraw the trail (only the trail when ``move_ball`` is
+    False: the page's player moves the ball with the video frame)."""
+    if not move_ball:
+        pass
+    elif np.isfinite(xyz).all():
         nodes.ball.position = tuple(float(v) for v in xyz)
         nodes.ball.visible = True
     else:

@@ -76,7 +76,7 @@ def test_frame_code_reads_back_after_jpeg(size):
 def test_player_report_parsing_rejects_what_the_page_would_never_send():
     good = {"seq": 3, "token": "abc", "shown": 5, "goal": 6, "dir": -1, "playing": False, "want": [6, 7, 900, -1]}
     rep = PlayerReport.parse(json.dumps(good), 0, 239)
-    assert rep == PlayerReport(3, "abc", 5, 6, -1, False, (6, 7))  # frames outside the clip are dropped
+    assert rep == PlayerReport(3, "abc", 5, 6, -1, False, (6, 7), 0)  # frames outside the clip are dropped
     for bad in ("", "[]", "{", json.dumps({**good, "shown": 240}), json.dumps({**good, "goal": "x"}),
                 json.dumps({k: v for k, v in good.items() if k != "want"})):
         assert PlayerReport.parse(bad, 0, 239) is None

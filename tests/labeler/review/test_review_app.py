@@ -231,7 +231,7 @@ def test_tick_keeps_a_play_click_still_on_its_way_and_unchecks_at_the_end():
             self.panel.play.value = playing
 
     s = Stub(lock=threading.Lock(), playback=Playback(0, 10, 10.0, loop=False), panel=SimpleNamespace(play=SimpleNamespace(value=True)),
-             renders=0)
+             renders=0, paged=False)  # the server's clock: before the page's player attaches
     Session.tick(s, 0.1)                         # the click's value arrived, its callback not yet
     assert s.panel.play.value is True and s.renders == 0
     s.playback.playing = True                    # the callback runs

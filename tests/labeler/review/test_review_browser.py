@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
 
 import cv2
 import numpy as np
@@ -16,6 +18,7 @@ import pytest
 from conftest import WAIT_CEILING_S, WEBGL_CANVAS, wait_for_canvas, wait_until
 from review_fixtures import reconstructed_clip, sample_shots  # noqa: F401  (fixture)
 
+from labeler.frames import code_cell_centres
 from labeler.review.app import ReviewApp
 from labeler.review.data import ReviewData
 from labeler.review.export import export_review
@@ -57,12 +60,13 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
         n = len(json.loads((reconstructed_clip / "segments.json").read_text())["segments"])
         assert status.inner_text().startswith(f"3D plausible: {n}/{n} flights reconstructed")
         assert "3D covers 100% of the rally" in status.inner_text()
-        video = page.locator("img[src^='blob:']").first  # the video frame (an object URL)
+        wait_until(lambda: session.paged, what="the page's player")
+        video = page.locator("canvas.r3d-video").first  # the video frame, drawn by the page's player
         wait_until(lambda: (video.bounding_box() or {}).get("width", 0) >= 600, what="the video panel at 600+ px")
         vbox, cbox = video.bounding_box(), canvas.bounding_box()
         assert vbox["height"] >= 300 and vbox["x"] + vbox["width"] <= cbox["x"] + 1  # beside, not over the 3D view
         assert cbox["width"] >= 600
-        assert session.shown == 40
+        wait_until(lambda: session.shown == 40, what="the page to report frame 40")
         shots: list[np.ndarray] = []
 
         def court_and_ball_drawn() -> bool:
@@ -112,6 +116,62 @@ def test_review_plays_and_shows_court_and_ball(reconstructed_clip, viser_page, p
             cv2.imwrite(out, cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR),
                         [cv2.IMWRITE_PNG_COMPRESSION, 9])
     finally:
+        app.stop()
+
+
+SAMPLE_JS = """
+(cfg) => {
+  const P = window.__r3dPlayer, out = window.__r3dSamples = [];
+  const ctx = P.video.getContext("2d", {willReadFrequently: true});
+  const timer = setInterval(() => {
+    let n = 0;
+    for (const [x, y] of cfg.cells) {
+      const d = ctx.getImageData(Math.round(x), Math.round(y), 1, 1).data;
+      n = n * 2 + ((d[0] + d[1] + d[2]) / 3 > 127 ? 1 : 0);
+    }
+    const p = P.ball.position;
+    out.push([n, P.ballMesh.visible ? [p.x, p.y, p.z] : null]);
+    if (out.length >= cfg.samples) clearInterval(timer);
+  }, 100);
+}
+"""
+"""Every 100 ms: the frame number read from the video canvas's burned-in code, and the 3D ball's position."""
+
+
+def test_review_video_and_3d_stay_in_step_while_playing_under_load(reconstructed_clip, viser_page, port):
+    """10 s of playing at 1× with a CPU-bound job beside it (one busy process per core): at every sample the
+    video's burned-in frame and the frame of the 3D ball agree within 2 frames, and the video advances."""
+    app = ReviewApp(reconstructed_clip, port=port)
+    app.start()
+    busy = []
+    try:
+        page = viser_page(port, width=1700, height=760)
+        wait_until(lambda: bool(app.sessions), what="the review session")
+        session = next(iter(app.sessions.values()))
+        wait_until(lambda: session.paged, what="the page's player")
+        ball = [None if b is None else np.array(b) for b in session.player.config["ball_xyz"]]
+        first = session.player.config["offset"]
+        busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 2)]
+        page.get_by_role("checkbox", name="play").check(timeout=WAIT_CEILING_S * 1000)
+        wait_until(lambda: session.playback.playing, what="play to reach the page")
+        page.evaluate(SAMPLE_JS, {"cells": code_cell_centres(session.player.config["width"]).tolist(), "samples": 100})
+        wait_until(lambda: page.evaluate("window.__r3dSamples.length") >= 100, what="10 s of samples")
+        samples = page.evaluate("window.__r3dSamples")
+        video = [n for n, _ in samples]
+        apart = []
+        for n, xyz in samples:
+            if xyz is None:
+                continue
+            frames = [first + k for k, b in enumerate(ball) if b is not None and np.abs(b - xyz).max() < 2e-3]
+            assert frames, f"the 3D ball at {xyz} is at no frame of the path"
+            apart.append(min(abs(f - n) for f in frames))
+        assert len(apart) >= 30, f"the ball was shown in only {len(apart)} of 100 samples"
+        assert max(apart) <= 2, f"video and 3D apart by up to {max(apart)} frames: {apart}"
+        assert len(set(video)) >= 10, f"the video showed only {len(set(video))} distinct frames in 10 s: {video}"
+    finally:
+        for p in busy:
+            p.kill()
+            p.wait()
         app.stop()
 
 
