@@ -1,16 +1,18 @@
 """End to end in headless Chromium: click the ball, press event keys, place court points, reload (back to the
-frame and mode), two tabs."""
+frame and mode), two tabs, the page's frame player (step, hold to play, Space)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import yaml
-from conftest import wait_for_canvas, wait_until
+from conftest import WEBGL_CANVAS, wait_for_canvas, wait_until
 from label_helpers import SAMPLE, click_pixel, copy_sample, press, ready_view, select_point
 
 from inference.camera import Camera
 from inference.clipio import Clip
 from labeler.app import LabelerApp
+from labeler.frames import code_cell_centres, read_frame_code
+from labeler.viewer_common import screen_of_pixel
 
 pytestmark = pytest.mark.browser
 
@@ -103,3 +105,65 @@ def test_two_tabs_on_one_clip_keep_both_edits(app_and_clip, viser_page):
     # B picked A's row up (idle re-read) or merged it when saving; either way it says so
     wait_until(lambda: "saved by another tab" in page_b.inner_text("body"), what="tab B telling it took A's row")
     wait_until(lambda: 1 in view_a.session.ball, what="tab A picking up B's row")
+
+
+READ_JS = """
+(pts) => {
+  const src = document.querySelector('canvas[data-engine^="three.js"]');
+  const probe = document.createElement("canvas");
+  probe.width = src.width; probe.height = src.height;
+  const ctx = probe.getContext("2d", {willReadFrequently: true});
+  ctx.drawImage(src, 0, 0);
+  return pts.map(([x, y]) => {
+    const d = ctx.getImageData(Math.round(x), Math.round(y), 1, 1).data;
+    return (d[0] + d[1] + d[2]) / 3;
+  });
+}
+"""
+"""Grey levels of the WebGL canvas at the given CSS pixels (the page is opened at a device pixel ratio of 1)."""
+
+
+def test_page_player_steps_plays_while_held_and_keeps_the_colours(app_and_clip, viser_page):
+    """J/L step in the page (the frame code read from the canvas names the new frame, and the server hears of
+    it); the page's own texture shows frame 0 as viser's did; holding L plays, releasing stops; Space plays
+    and pauses."""
+    app, _clip = app_and_clip
+    page = viser_page(app.server.get_port())
+    view = ready_view(app, page)
+    wait_until(lambda: view.paged, what="the page's frame player")
+    box = page.locator(WEBGL_CANVAS).bounding_box()
+    w, h = view.plane.width, view.plane.height
+    cells = screen_of_pixel(code_cell_centres(w), view.plane, box["width"], box["height"], view.fit_distance)
+    grid_px = np.array([[x, y] for x in (0.2, 0.4, 0.6, 0.8) for y in (0.3, 0.5, 0.7)]) * [w, h]
+    grid = screen_of_pixel(grid_px, view.plane, box["width"], box["height"], view.fit_distance)
+    n_bits = len(cells)
+
+    def read() -> tuple[int, np.ndarray]:
+        levels = page.evaluate(READ_JS, np.concatenate([cells, grid]).tolist())
+        return read_frame_code(levels[:n_bits]), np.asarray(levels[n_bits:])
+
+    wait_until(lambda: read()[0] == 0, what="frame 0's code on the canvas")
+    viser_picture = read()[1]                   # frame 0 as viser's own image node drew it
+    press(page, "l")
+    wait_until(lambda: read()[0] == 1 and view.shown == 1, what="frame 1 on the canvas and at the server")
+    press(page, "Shift+L")
+    wait_until(lambda: read()[0] == 11 and view.shown == 11, what="frame 11 after Shift+L")
+    press(page, "Shift+J")
+    press(page, "j")
+    wait_until(lambda: read()[0] == 0 and view.shown == 0, what="back on frame 0")
+    assert np.abs(read()[1] - viser_picture).max() < 12  # the page's texture: same picture, same colours
+
+    page.keyboard.down("l")                     # held: plays at the clip's rate
+    wait_until(lambda: read()[0] >= 12, what="frames advancing while L is held")
+    page.keyboard.up("l")
+    wait_until(lambda: not view.playing and view.shown == read()[0], what="playing to stop on release")
+    stopped = read()[0]
+    assert stopped >= 12
+    press(page, "Shift+J")                      # a step from where it stopped
+    wait_until(lambda: read()[0] == stopped - 10 and view.shown == stopped - 10, what="Shift+J after the hold")
+    stopped -= 10
+
+    press(page, " ")                            # Space: plays until Space again
+    wait_until(lambda: view.playing and read()[0] >= stopped + 5, what="Space to play")
+    press(page, " ")
+    wait_until(lambda: not view.playing and view.shown == read()[0], what="Space to pause")
