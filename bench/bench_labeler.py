@@ -96,33 +96,39 @@ it sees the key even where the page's player stops the event."""
 READ_JS = """
 (cfg) => {
   const src = document.querySelector('canvas[data-engine^="three.js"]');
-  const probe = document.createElement("canvas");
-  probe.width = src.width; probe.height = src.height;
-  const ctx = probe.getContext("2d", {willReadFrequently: true});
-  const px = (pts) => {
-    const out = [];
-    for (const [x, y] of pts) {
-      const d = ctx.getImageData(Math.round(x * cfg.dpr), Math.round(y * cfg.dpr), 1, 1).data;
-      out.push((d[0] + d[1] + d[2]) / 3);
-    }
-    return out;
-  };
+  // the WebGL context the page draws with (asking again returns it): read small regions of its drawing
+  // buffer (kept between renders), not a copy of the whole canvas, so that reading does not slow the page
+  const gl = src.getContext("webgl2") || src.getContext("webgl");
+  const H = gl.drawingBufferHeight, s = gl.drawingBufferWidth / src.clientWidth;
+  const pts = cfg.code.concat(cfg.grid).map(([x, y]) => [Math.round(x * s), H - 1 - Math.round(y * s)]);
+  const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
+  const x0 = Math.max(0, Math.min(...xs)), y0 = Math.max(0, Math.min(...ys.slice(0, cfg.code.length)));
+  const w = Math.max(...xs.slice(0, cfg.code.length)) - x0 + 1;
+  const row = new Uint8Array(w * 4), one = new Uint8Array(4);
   const R = window.__r3dRead = {log: [], running: true};
-  const tick = (t) => {
+  const tick = () => {
     if (!R.running) return;
-    ctx.drawImage(src, 0, 0);
-    const bits = px(cfg.code);
+    gl.readPixels(x0, y0, w, 1, gl.RGBA, gl.UNSIGNED_BYTE, row);  // the code's cells lie on one row
     let n = 0;
-    for (const b of bits) n = n * 2 + (b > 127 ? 1 : 0);
-    R.log.push([performance.now(), n, px(cfg.grid)]);
+    for (let k = 0; k < cfg.code.length; k++) {
+      const i = (pts[k][0] - x0) * 4;
+      n = n * 2 + ((row[i] + row[i + 1] + row[i + 2]) / 3 > 127 ? 1 : 0);
+    }
+    const grid = [];
+    for (let k = cfg.code.length; k < pts.length; k++) {
+      gl.readPixels(pts[k][0], pts[k][1], 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
+      grid.push((one[0] + one[1] + one[2]) / 3);
+    }
+    R.log.push([performance.now(), n, grid]);
     if (R.log.length > 20000) R.log.splice(0, 10000);
     requestAnimationFrame(tick);
   };
   requestAnimationFrame(tick);
 }
 """
-"""Reads, at every animation frame, the frame code (``cfg.code``: cell centres in CSS px) and a few picture
-pixels (``cfg.grid``) from the WebGL canvas; ``window.__r3dRead.log`` holds ``[time, code, grid]``."""
+"""Reads, at every animation frame, the frame code (``cfg.code``: cell centres in CSS px, on one row) and a
+few picture pixels (``cfg.grid``) from the WebGL drawing buffer; ``window.__r3dRead.log`` holds
+``[time, code, grid]``."""
 
 
 class Busy:
@@ -195,7 +201,7 @@ def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s
             frame = 0
 
             def shown_code() -> int:
-                return page.evaluate("window.__r3dRead.log.at(-1)[1]")
+                return page.evaluate("(window.__r3dRead.log.at(-1) || [0, -1])[1]")
 
             wait_for(lambda: shown_code() == frame, "frame 0's code on the canvas", 60)
 
@@ -266,13 +272,18 @@ def main() -> int:
     frames = steps + 10 * max(steps // 3, 3) + int(HOLD_S * 30 * 1.5) + 20
     tmp = Path(tempfile.mkdtemp(prefix="bench_labeler_"))
     rows = []
+
+    def row(size: str, what: str, figs: str) -> None:
+        rows.append((size, what, figs))
+        print(f"  {size:<10} {what:<62} {figs}", file=sys.stderr, flush=True)  # as they come (a crash keeps them)
+
     t_cpu = time.process_time()
     try:
         for size in args.sizes.split(","):
             clip = make_clip(tmp, size, frames)
             cold, warm = serve_times(clip, min(steps, 30))
-            rows.append((size, "serve next frame, cold (decode + JPEG encode)", stats(cold)))
-            rows.append((size, "serve next frame, prefetched", stats(warm)))
+            row(size, "serve next frame, cold (decode + JPEG encode)", stats(cold))
+            row(size, "serve next frame, prefetched", stats(warm))
             if args.no_browser or not Path(args.chromium).exists():
                 continue
             for variant in args.variants.split(","):
@@ -280,14 +291,13 @@ def main() -> int:
                     with Busy(load == "busy"):
                         r = browser_run(clip, steps, args.chromium, variant, args.dwell)
                     tag = f"{variant}, {load}"
-                    rows.append((size, f"L → new frame on screen ({tag})", stats(r["one"])))
-                    rows.append((size, f"Shift+L → frame +10 on screen ({tag})", stats(r["ten"])))
+                    row(size, f"L → new frame on screen ({tag})", stats(r["one"]))
+                    row(size, f"Shift+L → frame +10 on screen ({tag})", stats(r["ten"]))
                     hold = (f"{r['hold_fps']:8.1f} {r['hold_lag'] * 1000:8.0f}" if "hold_fps" in r
                             else f"{'–':>8} {'–':>8}")
-                    rows.append((size, f"hold L: frames/s shown | max lag ms ({tag})", hold))
-                    rows.append((size, f"intermediate renders | steps missed ({tag})",
-                                 f"{r['intermediate']:8d} {r['missed']:8d}"))
-                    print(f"  {size} {tag}: done", file=sys.stderr, flush=True)
+                    row(size, f"hold L: frames/s shown | max lag ms ({tag})", hold)
+                    row(size, f"intermediate renders | steps missed ({tag})",
+                        f"{r['intermediate']:8d} {r['missed']:8d}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print(f"labeler step latency ({steps} steps, {args.dwell:g} s on each frame; ms unless named; "

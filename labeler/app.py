@@ -40,8 +40,11 @@ PAGE_AHEAD, PAGE_BEHIND = 16, 6
 """Frames the page keeps ready ahead of the cursor (in the stepping direction) and behind it."""
 PAGE_BUDGET_PX = 64e6
 """Decoded pixels the page keeps as textures (≈ 256 MB: 30 frames at 1080p, 7 at 4K)."""
+PLAYING_DRAW_S = 0.5
+"""While the page plays, overlays and status follow it at most this often (each update re-renders the page's
+panel, which would take the time the page needs for its frames)."""
 PAGE_MAX_BLOBS = 400
-"""Compressed frames the page keeps (≈ 100 MB of 1080p JPEGs)."""
+"""Compressed frames the page keeps at 1080p (≈ 100 MB of JPEGs; fewer for larger frames, more for smaller)."""
 
 # (label, hotkey, modifier, action name, argument): the keys avoid W/A/S/D/Q/E and the arrows (camera keys)
 HOTKEYS: list[tuple[str, str, str | None, str, object]] = [
@@ -94,6 +97,7 @@ class ClientView:
         self.page_goal = 0       # the page's cursor (its last report)
         self._go: int | None = None   # a jump asked by the server (slider, events, ...) not yet sent to the page
         self._drawn = -1         # the frame whose overlays and status were drawn last
+        self._drawn_at = 0.0
         self.playing, self.speed = False, 1.0
         self.follow = False
         self.fit_distance: float | None = None
@@ -113,8 +117,10 @@ class ClientView:
         self.frame_node = FramePlane(client.scene, self.plane, self._on_click)
         self.player = BrowserPlayer(client, self.frames.get, self._on_report, kind="plane", node=NODE, lo=0,
                                     hi=s.n_frames - 1, fps=float(s.fps), first=0, ahead=PAGE_AHEAD,
-                                    behind=PAGE_BEHIND, budget_px=PAGE_BUDGET_PX, max_blobs=PAGE_MAX_BLOBS,
-                                    width=s.width, height=s.height, speed=1.0, loop=False)
+                                    behind=PAGE_BEHIND, budget_px=PAGE_BUDGET_PX,
+                                    max_blobs=max(32, int(PAGE_MAX_BLOBS * 1920 * 1080 / (s.width * s.height))),
+                                    width=s.width, height=s.height, render_height=self.plane.render_height,
+                                    speed=1.0, loop=False)
         self.use_page = bool(app.page_player)
         self.overlay = Overlay(client.scene, self.plane)
 
@@ -555,14 +561,16 @@ class ClientView:
         if self._overlay_dirty or self._gui_dirty or self._go is not None:
             return True
         if self.paged:
-            return self.shown != self._drawn or self.player.has_wanted()
+            due = self.shown != self._drawn and \
+                (not self.playing or time.monotonic() - self._drawn_at >= PLAYING_DRAW_S)
+            return due or self.player.has_wanted()
         return self.target != self.shown
 
     def _render_loop(self) -> None:
         while True:
             with self._cond:
                 if not self._closed and not self._work():
-                    self._cond.wait(timeout=1.0)
+                    self._cond.wait(timeout=PLAYING_DRAW_S / 2 if self.playing else 1.0)
                 if self._closed:
                     return
                 if not self._work():
@@ -618,7 +626,7 @@ class ClientView:
             self._refresh_gui(frame)
         if not paged:
             self.shown = frame
-        self._drawn = frame
+        self._drawn, self._drawn_at = frame, time.monotonic()
         self.client.flush()
         if self.use_page and not self.player.attached and not self._attach_sent:
             self._attach_sent = True   # the node has its first picture: the page's player can take it over
@@ -800,6 +808,8 @@ class LabelerApp:
         self.page_player = bool(page_player)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         setup_server(self.server)
+        # the frame and overlays are unlit: no lights, no shadow passes (software WebGL pays per pixel drawn)
+        self.server.scene.configure_default_lights(enabled=False, cast_shadow=False)
         self._caches: dict[Path, FrameCache] = {}
         self._cache_lock = threading.Lock()
         self.views: dict[int, ClientView] = {}

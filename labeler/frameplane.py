@@ -31,7 +31,8 @@ class FramePlane:
     def __init__(self, scene, plane: ImagePlane, on_click: Callable):
         self.plane = plane
         self.node = scene.add_image(NODE, np.zeros((8, 8, 3), np.uint8), render_width=plane.render_width,
-                                    render_height=plane.render_height, format="jpeg", position=(0.0, 0.0, 0.0))
+                                    render_height=plane.render_height, format="jpeg", position=(0.0, 0.0, 0.0),
+                                    cast_shadow=False, receive_shadow=False)
         self.node.on_click(on_click)
         self.node.on_drag("left")(lambda ev: None)  # a left-drag on the frame must not orbit the camera
         self.shown = -1

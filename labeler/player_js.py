@@ -68,7 +68,7 @@ PLAYER_JS = r"""
   P.attach = (cfg) => {
     P.reset();
     P.cfg = cfg; P.token = cfg.token; P.shown = cfg.first; P.goal = cfg.first; P.dir = 1;
-    P.speed = cfg.speed || 1.0; P.maxDecoded = Math.max(4, Math.floor(cfg.budget_px / (cfg.width * cfg.height)));
+    P.speed = cfg.speed || 1.0; P.lastScale = 1;
     let tries = 0;
     const go = () => {
       if (P.cfg !== cfg) return;
@@ -91,6 +91,7 @@ PLAYER_JS = r"""
     mesh.onBeforeRender = (renderer) => {
       P.renderer = renderer;
       if (P.current && P.current.tex && mesh.material.map !== P.current.tex) mesh.material.map = P.current.tex;
+      if (!P.playing) P.sharpen();  // the view was zoomed: more pixels for the frame shown
     };
     return true;
   };
@@ -137,10 +138,15 @@ PLAYER_JS = r"""
   P.prepare = () => {
     if (!P.cfg) return;
     const order = P.window();
-    const keep = new Set(order.slice(0, P.maxDecoded));
+    const px = P.cfg.width * P.cfg.height * P.lastScale * P.lastScale;  // pixels of a decoded frame
+    const keep = new Set(order.slice(0, Math.max(4, Math.floor(P.cfg.budget_px / px))));
     if (P.current) keep.add(P.current.f);
-    // forget decoded frames far from the cursor, then compressed ones beyond the budget
-    for (const e of P.entries.values()) if ((e.tex || e.bitmap) && !keep.has(e.f)) P.drop(e, false);
+    // forget decoded frames far from the cursor or with fewer pixels than a zoom needs, then compressed
+    // ones beyond the budget
+    const need = P.scaleNeeded();
+    for (const e of P.entries.values()) {
+      if ((e.tex || e.bitmap) && (!keep.has(e.f) || (e.scale < need && !e.loading))) P.drop(e, false);
+    }
     if (P.entries.size > P.cfg.max_blobs) {
       const far = Array.from(P.entries.values()).sort((a, b) => Math.abs(b.f - P.goal) - Math.abs(a.f - P.goal));
       for (const e of far.slice(0, P.entries.size - P.cfg.max_blobs)) {
@@ -157,14 +163,35 @@ PLAYER_JS = r"""
       P.decode(e);
     }
   };
+  // the share of the frame's pixels the view needs (1/8 steps): a 1080p frame fitted into a canvas 1000
+  // pixels wide needs about half of them, so it is decoded, uploaded and drawn at that size (software WebGL
+  // pays per pixel); zoomed in, all of them
+  P.scaleNeeded = () => {
+    if (P.cfg.kind !== "plane" || !P.mesh) return 1;
+    const m = P.viewer(), cam = m && m.camera;
+    if (!cam || !m.canvas || !cam.fov) return 1;
+    const local = P.mesh.worldToLocal(cam.getWorldPosition(cam.position.clone()));
+    const d = Math.abs(local.z);
+    if (!(d > 1e-6)) return 1;
+    const screenH = m.canvas.height * P.cfg.render_height / (2 * d * Math.tan(cam.fov * Math.PI / 360));
+    return Math.min(1, Math.ceil(8 * 1.15 * screenH / P.cfg.height) / 8);
+  };
   P.decode = (e) => {
     e.loading = true; P.decoding += 1;
-    const token = P.token;
-    const flip = P.cfg.kind === "plane";  // WebGL does not flip ImageBitmaps on upload: flip while decoding
-    createImageBitmap(e.blob, flip ? {imageOrientation: "flipY"} : {}).then((bm) => {
-      e.loading = false; P.decoding -= 1; P.decoded = (P.decoded || 0) + 1;
+    const token = P.token, scale = P.scaleNeeded();
+    const opts = {};
+    if (P.cfg.kind === "plane") opts.imageOrientation = "flipY";  // WebGL does not flip ImageBitmaps on upload
+    if (scale < 1) {
+      opts.resizeWidth = Math.max(16, Math.round(P.cfg.width * scale));
+      opts.resizeHeight = Math.max(16, Math.round(P.cfg.height * scale));
+      opts.resizeQuality = "medium";
+    }
+    createImageBitmap(e.blob, opts).then((bm) => {
+      e.loading = false; P.decoding -= 1;
       if (token !== P.token || !P.entries.has(e.f)) { bm.close(); return; }
-      e.bitmap = bm;
+      const sharper = !!(e.tex || e.bitmap);  // a zoom asked for more pixels: replace the picture
+      if (e.bitmap) e.bitmap.close();
+      e.bitmap = bm; e.scale = scale; P.lastScale = scale;
       if (P.cfg.kind === "plane") {
         const T = P.template;
         const tex = new T.constructor(bm);
@@ -172,11 +199,18 @@ PLAYER_JS = r"""
         tex.minFilter = 1006; tex.magFilter = 1006;  // THREE.LinearFilter: no mipmaps to build per frame
         tex.needsUpdate = true;
         if (P.renderer && P.renderer.initTexture) P.renderer.initTexture(tex);  // upload now, not on the key
+        const old = e.tex;
         e.tex = tex;
+        if (sharper && P.current === e) { P.mesh.material.map = tex; P.render(); }
+        if (old) old.dispose();
       }
-      if (e.f === P.goal && P.shown !== e.f && !P.playing) P.show(e.f);
+      if (!sharper && e.f === P.goal && P.shown !== e.f && !P.playing) P.show(e.f);
       P.prepare();
-    }, (err) => { e.loading = false; P.decoding -= 1; e.blob = null; P.failed = String(err); P.prepare(); });
+    }, (err) => { e.loading = false; P.decoding -= 1; if (!e.tex) e.blob = null; P.failed = String(err); P.prepare(); });
+  };
+  P.sharpen = () => {  // the frame shown, decoded again with the pixels a zoom needs
+    const e = P.current;
+    if (e && e.blob && !e.loading && e.scale !== undefined && e.scale < P.scaleNeeded()) P.decode(e);
   };
 
   // ------------------------------------------------------------------------------------ the cursor
@@ -308,23 +342,21 @@ PLAYER_JS = r"""
     const ball = m && m.nodeRefFromName[cfg.ball];
     const img = Array.from(document.querySelectorAll("img")).find((i) => i.naturalWidth === cfg.width);
     if (!ball || !img) return false;
-    let canvas = img.parentElement.querySelector("canvas.r3d-video");
-    if (!canvas) {
-      canvas = document.createElement("canvas");
-      canvas.className = "r3d-video";
-      canvas.style.cssText = "max-width:100%;height:auto;display:block";
-      img.parentElement.insertBefore(canvas, img);
-    }
-    let caption = img.parentElement.querySelector("div.r3d-caption");
-    if (!caption) {
-      caption = document.createElement("div");
-      caption.className = "r3d-caption";
-      caption.style.cssText = "font-weight:600;font-size:0.9em;padding:0 0 0.3em 0";
-      img.parentElement.insertBefore(caption, canvas);
-    }
+    // our own elements beside viser's <img> (kept across a re-attach): the caption, then the video canvas
+    const own = (tag, cls, css, before) => {
+      let el = img.parentElement.querySelector(tag + "." + cls);
+      if (!el) {
+        el = document.createElement(tag);
+        el.className = cls; el.style.cssText = css;
+        img.parentElement.insertBefore(el, before);
+      }
+      return el;
+    };
+    const canvas = own("canvas", "r3d-video", "max-width:100%;height:auto;display:none", img);
+    const caption = own("div", "r3d-caption", "font-weight:600;font-size:0.9em;padding:0 0 0.3em 0", canvas);
+    P.img = img;
     P.caption = caption;
     canvas.width = cfg.width; canvas.height = cfg.height;
-    img.style.display = "none";
     let mesh = null;  // viser sets the node's own visibility every render: hide and show the mesh inside
     ball.traverse((o) => { if (!mesh && o.isMesh) mesh = o; });
     if (!mesh) return false;
@@ -333,6 +365,7 @@ PLAYER_JS = r"""
   };
   P.drawReview = (e) => {
     P.ctx.drawImage(e.bitmap, 0, 0);
+    if (P.video.style.display === "none") { P.video.style.display = "block"; P.img.style.display = "none"; }
     const xyz = P.cfg.ball_xyz[e.f - P.cfg.offset];
     if (xyz) { P.ball.position.set(xyz[0], xyz[1], xyz[2]); P.ballMesh.visible = true; }
     else P.ballMesh.visible = false;

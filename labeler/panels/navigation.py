@@ -32,8 +32,10 @@ def populate_navigation(gui, view) -> NavigationPanel:
     history = gui.add_button_group("history", ["undo", "redo", "fit view"])
     mode = gui.add_dropdown("mode (M)", MODES, initial_value="ball")
 
-    slider.on_update(lambda ev: view.goto(int(slider.value)))
-    goto.on_update(lambda ev: view.goto(int(goto.value)))
+    # viser also runs these callbacks when the server sets the value (the status follows the page's frame):
+    # only the annotator's own changes navigate, or the page would be sent back to a frame it has left
+    slider.on_update(lambda ev: ev.client is not None and view.goto(int(slider.value)))
+    goto.on_update(lambda ev: ev.client is not None and view.goto(int(goto.value)))
 
     def on_step(ev) -> None:
         v = steps.value
@@ -48,8 +50,8 @@ def populate_navigation(gui, view) -> NavigationPanel:
             view.next_unlabelled()
 
     steps.on_click(on_step)
-    play.on_update(lambda ev: view.set_playing(bool(play.value)))
-    speed.on_update(lambda ev: view.set_speed(float(speed.value)))
+    play.on_update(lambda ev: ev.client is not None and view.set_playing(bool(play.value)))
+    speed.on_update(lambda ev: ev.client is not None and view.set_speed(float(speed.value)))
 
     def on_history(ev) -> None:
         {"undo": view.undo, "redo": view.redo, "fit view": view.fit}[history.value]()

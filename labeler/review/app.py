@@ -213,11 +213,7 @@ class Session:
     def _set_play(self, playing: bool) -> None:
         """Play or pause, and show it in the checkbox (without its callback)."""
         self._play(playing)
-        self._syncing = True
-        try:
-            self.panel.play.value = playing
-        finally:
-            self._syncing = False
+        self._quietly(self.panel.play, playing)
 
     def tick(self, dt: float) -> None:
         """Page playback: draw the server's parts for the frame the page reported. Before the page attaches:
@@ -236,13 +232,9 @@ class Session:
             with self.lock:
                 frame, playing = self.playback.frame, self.playback.playing
             if frame != self._drawn:
-                self._draw_server_parts(frame)
+                self._draw(frame)
             if bool(self.panel.play.value) != playing:
-                self._syncing = True
-                try:
-                    self.panel.play.value = playing
-                finally:
-                    self._syncing = False
+                self._quietly(self.panel.play, playing)
             return
         with self.lock:
             was_playing = self.playback.playing
@@ -254,44 +246,39 @@ class Session:
         if ended:  # stopped at the end (no loop): only then uncheck the box, never a click still on its way
             self._set_play(False)
 
-    def _draw_server_parts(self, f: int, from_slider: bool = False) -> None:
+    def _draw(self, f: int, from_slider: bool = False, video: np.ndarray | None = None) -> None:
+        """Trail, players, shot text and slider for frame ``f``; with ``video`` also the ball and the video
+        picture, in one message batch (the server's clock, before the page's player attaches)."""
         d = self.app.data
         with self.client.atomic():
-            update_ball(self.nodes, d.ball_at(f), d.trail(f, TRAIL_FRAMES), move_ball=False)
+            update_ball(self.nodes, d.ball_at(f), d.trail(f, TRAIL_FRAMES), move_ball=video is not None)
             self.players.update(d.players_at(f))
+            if video is not None:
+                self.info.video.image = video
+                self.info.frame.content = f"**frame {f}** (3D view and video)"
+                self.shown = f
         self.info.current.content = current_shot_markdown(d.analysis, f)
         self._drawn = f
         if not from_slider:
-            self._syncing = True
-            try:
-                self.panel.frame.value = f
-            finally:
-                self._syncing = False
+            self._quietly(self.panel.frame, f)
+
+    def _quietly(self, handle, value) -> None:
+        """Set a panel input's value without running its callback's effect."""
+        self._syncing = True
+        try:
+            handle.value = value
+        finally:
+            self._syncing = False
 
     def render(self, from_slider: bool = False) -> None:
         """Show the current frame: ball, trail, players, video overlay, shot text, slider position (once the
         page's player is attached: ask the page to go there; it draws video and ball, then reports)."""
-        d = self.app.data
         f = self.playback.frame
         if self.paged:
             self.player.goto(f)
-            self._draw_server_parts(f, from_slider)
-            return
-        image = self.app.frames.get(f)  # decoded before the batch: 3D and video leave together
-        with self.client.atomic():
-            update_ball(self.nodes, d.ball_at(f), d.trail(f, TRAIL_FRAMES))
-            self.players.update(d.players_at(f))
-            self.info.video.image = image
-            self.info.frame.content = f"**frame {f}** (3D view and video)"
-            self.shown = f
-        self._drawn = f
-        self.info.current.content = current_shot_markdown(d.analysis, f)
-        if not from_slider:
-            self._syncing = True
-            try:
-                self.panel.frame.value = f
-            finally:
-                self._syncing = False
+            self._draw(f, from_slider)
+        else:
+            self._draw(f, from_slider, video=self.app.frames.get(f))  # decoded before the batch
 
 
 class ReviewApp:
