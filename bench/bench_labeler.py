@@ -6,7 +6,8 @@ For synthetic H.264 clips (``rally3d synth``, generated into a temporary folder)
   with prefetching off, and the same once the prefetch thread has had the frame in hand (server side);
 * **key → new frame on screen**, in headless Debian Chromium (software WebGL). Every picture carries its frame
   number as a binary code under the burned-in ``#number`` (:func:`labeler.frames.stamp_frame_number`); the page
-  reads the code's cells back from the WebGL canvas at every animation frame, and the latency is the time from
+  reads the code's cells back from the picture on screen at every animation frame (the page player's frame
+  canvas, or viser's WebGL canvas where the server draws the frame), and the latency is the time from
   the key's ``keydown`` to the first animation frame whose code reads the new frame's number. The same
   reading for every variant:
 
@@ -95,40 +96,25 @@ it sees the key even where the page's player stops the event."""
 
 READ_JS = """
 (cfg) => {
-  const src = document.querySelector('canvas[data-engine^="three.js"]');
-  // the WebGL context the page draws with (asking again returns it): read small regions of its drawing
-  // buffer (kept between renders), not a copy of the whole canvas, so that reading does not slow the page
-  const gl = src.getContext("webgl2") || src.getContext("webgl");
-  const H = gl.drawingBufferHeight, s = gl.drawingBufferWidth / src.clientWidth;
-  const pts = cfg.code.concat(cfg.grid).map(([x, y]) => [Math.round(x * s), H - 1 - Math.round(y * s)]);
-  const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
-  const x0 = Math.max(0, Math.min(...xs)), y0 = Math.max(0, Math.min(...ys.slice(0, cfg.code.length)));
-  const w = Math.max(...xs.slice(0, cfg.code.length)) - x0 + 1;
-  const row = new Uint8Array(w * 4), one = new Uint8Array(4);
+  const probe = eval(cfg.probe);
+  const pts = cfg.code.concat(cfg.grid), n = cfg.code.length;
   const R = window.__r3dRead = {log: [], running: true};
   const tick = () => {
     if (!R.running) return;
-    gl.readPixels(x0, y0, w, 1, gl.RGBA, gl.UNSIGNED_BYTE, row);  // the code's cells lie on one row
-    let n = 0;
-    for (let k = 0; k < cfg.code.length; k++) {
-      const i = (pts[k][0] - x0) * 4;
-      n = n * 2 + ((row[i] + row[i + 1] + row[i + 2]) / 3 > 127 ? 1 : 0);
-    }
-    const grid = [];
-    for (let k = cfg.code.length; k < pts.length; k++) {
-      gl.readPixels(pts[k][0], pts[k][1], 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, one);
-      grid.push((one[0] + one[1] + one[2]) / 3);
-    }
-    R.log.push([performance.now(), n, grid]);
+    const levels = probe(pts);
+    let code = 0;
+    for (let k = 0; k < n; k++) code = code * 2 + (levels[k] > 127 ? 1 : 0);
+    R.log.push([performance.now(), code, levels.slice(n)]);
     if (R.log.length > 20000) R.log.splice(0, 10000);
     requestAnimationFrame(tick);
   };
   requestAnimationFrame(tick);
 }
 """
-"""Reads, at every animation frame, the frame code (``cfg.code``: cell centres in CSS px, on one row) and a
-few picture pixels (``cfg.grid``) from the WebGL drawing buffer; ``window.__r3dRead.log`` holds
-``[time, code, grid]``."""
+"""Reads, at every animation frame, the frame code (``cfg.code``: cell centres in CSS px) and a few picture
+pixels (``cfg.grid``) of the picture on screen with :data:`labeler.player_js.PROBE_JS` (the page player's
+frame canvas where it shows the frame, else viser's WebGL drawing buffer: small reads, so that reading does
+not slow the page); ``window.__r3dRead.log`` holds ``[time, code, grid]``."""
 
 
 class Busy:
@@ -196,7 +182,9 @@ def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s
             code = screen_of_pixel(code_cell_centres(w), plane, box["width"], box["height"], view.fit_distance)
             grid_px = np.array([[x, y] for x in (0.3, 0.5, 0.7) for y in (0.3, 0.5, 0.7)]) * [w, h]
             grid = screen_of_pixel(grid_px, plane, box["width"], box["height"], view.fit_distance)
-            page.evaluate(READ_JS, {"code": code.tolist(), "grid": grid.tolist(), "dpr": 1})
+            from labeler.player_js import PROBE_JS
+
+            page.evaluate(READ_JS, {"code": code.tolist(), "grid": grid.tolist(), "probe": PROBE_JS})
             fps = float(view.session.fps)
             frame = 0
 

@@ -107,6 +107,7 @@ class ClientView:
         self._fit_pending = True
         self._overlay_dirty = self._gui_dirty = True
         self._attach_sent = False
+        self._play_box_stale = False
         self._closed = False
         self._cond = threading.Condition()
         self.step_times: list[float] = []  # seconds from a step request to its frame sent (for the bench)
@@ -274,7 +275,8 @@ class ClientView:
             if self._go is None:
                 self.target = rep.goal
             if rep.playing != self.playing and self.player.follows_commands(rep):
-                self.playing = rep.playing
+                self.playing = rep.playing   # the page's own doing (a held key, Space): the checkbox follows
+                self._play_box_stale = True
                 self._gui_dirty = True
             self._cond.notify_all()
         self.app.note_place(self)
@@ -634,7 +636,7 @@ class ClientView:
             self.player.attach()
         if self.follow:
             self._follow_ball(frame)
-        self.frames.prefetch(frame, direction)
+        self.frames.prefetch(frame, direction, self.player.scale if paged else 1.0)
 
     def _refresh_gui(self, frame: int) -> None:
         s = self.session
@@ -642,7 +644,8 @@ class ClientView:
         nav = self.nav
         if int(nav.slider.value) != frame:
             nav.slider.value = frame
-        if bool(nav.play.value) != self.playing:
+        if self._play_box_stale:  # only then: a click on the box may still be on its way
+            self._play_box_stale = False
             nav.play.value = self.playing
         row = s.ball.get(frame)
         ball = "not labelled" if row is None else VISIBILITY_NAMES[row[0]]

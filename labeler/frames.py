@@ -8,6 +8,7 @@ backwards in H.264 is not, so the cache keeps a window on both sides.
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import OrderedDict, deque
@@ -76,6 +77,11 @@ def stamp_frame_number(rgb: np.ndarray, index: int) -> np.ndarray:
     return img
 
 
+def eighths(scale: float) -> int:
+    """A share of the full frame size (0, 1] as eighths, rounded up (1..8)."""
+    return int(min(8, max(1, math.ceil(float(scale) * 8 - 1e-6))))
+
+
 @dataclass
 class FrameTiming:
     """Seconds spent decoding and encoding the last frame served without the cache (for the bench)."""
@@ -107,8 +113,8 @@ class FrameCache:
         self._source: FrameSource = clip.frames(cache_size=0)
         self._decode_lock = threading.Lock()
         self._lock = threading.Lock()
-        self._jpeg: OrderedDict[int, bytes] = OrderedDict()
-        self._queue: deque[int] = deque()
+        self._jpeg: OrderedDict[tuple[int, int], bytes] = OrderedDict()  # (frame, eighths of full size)
+        self._queue: deque[tuple[int, int]] = deque()
         self._wake = threading.Condition(self._lock)
         self._stopped = False
         self.last = FrameTiming()
@@ -126,54 +132,64 @@ class FrameCache:
         with self._decode_lock:
             self._source.close()
 
-    def cached(self, index: int) -> bool:
+    def cached(self, index: int, scale: float = 1.0) -> bool:
         with self._lock:
-            return index in self._jpeg
+            return (int(index), eighths(scale)) in self._jpeg
 
-    def peek(self, index: int) -> bytes | None:
+    def peek(self, index: int, scale: float = 1.0) -> bytes | None:
         """JPEG bytes of frame ``index`` if already cached, else None (never decodes)."""
         with self._lock:
-            return self._jpeg.get(int(index))
+            return self._jpeg.get((int(index), eighths(scale)))
 
-    def get(self, index: int) -> bytes:
-        """JPEG bytes of frame ``index`` (cached, or decoded and encoded now)."""
+    def get(self, index: int, scale: float = 1.0) -> bytes:
+        """JPEG bytes of frame ``index`` (cached, or decoded and encoded now), at ``scale`` of its size
+        (rounded up to eighths: the page asks for the pixels its view needs)."""
         index = int(index)
         if not 0 <= index < self.n_frames:
             raise IndexError(f"frame {index} is outside the clip (0..{self.n_frames - 1})")
+        key = (index, eighths(scale))
         with self._lock:
-            data = self._jpeg.get(index)
+            data = self._jpeg.get(key)
             if data is not None:
-                self._jpeg.move_to_end(index)
+                self._jpeg.move_to_end(key)
                 return data
-        return self._load(index)
+        return self._load(key)
 
-    def _load(self, index: int) -> bytes:
+    def _load(self, key: tuple[int, int]) -> bytes:
+        import cv2
+
+        index, eighth = key
         with self._decode_lock:
             with self._lock:  # another thread may have produced it while we waited
-                if index in self._jpeg:
-                    return self._jpeg[index]
+                if key in self._jpeg:
+                    return self._jpeg[key]
             t0 = time.perf_counter()
             rgb = self._source.read(index)
             if self.stamp:
                 rgb = stamp_frame_number(rgb, index)
+            if eighth < 8:
+                h, w = rgb.shape[:2]
+                rgb = cv2.resize(rgb, (max(16, round(w * eighth / 8)), max(16, round(h * eighth / 8))),
+                                 interpolation=cv2.INTER_AREA)
             t1 = time.perf_counter()
             data = encode_jpeg(rgb, self.quality)
             self.last = FrameTiming(t1 - t0, time.perf_counter() - t1)
         with self._lock:
-            self._jpeg[index] = data
-            self._jpeg.move_to_end(index)
+            self._jpeg[key] = data
+            self._jpeg.move_to_end(key)
             while len(self._jpeg) > self.capacity:
                 self._jpeg.popitem(last=False)
         return data
 
-    def prefetch(self, index: int, direction: int = 1) -> None:
+    def prefetch(self, index: int, direction: int = 1, scale: float = 1.0) -> None:
         """Queue the frames around ``index`` (``direction`` = +1 forward, -1 backward) for decoding."""
         step = 1 if direction >= 0 else -1
         wanted = [index + step * k for k in range(1, self.ahead + 1)]
         wanted += [index - step * k for k in range(1, self.behind + 1)]
         wanted = [i for i in wanted if 0 <= i < self.n_frames]
+        eighth = eighths(scale)
         with self._wake:
-            self._queue = deque(i for i in wanted if i not in self._jpeg)
+            self._queue = deque((i, eighth) for i in wanted if (i, eighth) not in self._jpeg)
             self._wake.notify_all()
 
     def _worker(self) -> None:
@@ -183,10 +199,10 @@ class FrameCache:
                     self._wake.wait()
                 if self._stopped:
                     return
-                index = self._queue.popleft()
-                if index in self._jpeg:
+                key = self._queue.popleft()
+                if key in self._jpeg:
                     continue
             try:
-                self._load(index)
+                self._load(key)
             except Exception:  # a broken frame is reported when it is actually asked for
                 pass

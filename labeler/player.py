@@ -29,7 +29,8 @@ class PlayerReport:
         shown: the frame on screen; goal: the frame the page is going to (= shown unless still decoding);
         direction: +1 / -1, the last stepping direction; playing: the page is playing;
         want: frames the page lacks around its cursor, most wanted first;
-        cmd: the number of the server's last play / pause command the page had received.
+        cmd: the number of the server's last play / pause command the page had received;
+        scale: the share of the frame's size the page's view needs (0, 1] (the frames are sent at that size).
     """
 
     seq: int
@@ -40,6 +41,7 @@ class PlayerReport:
     playing: bool
     want: tuple[int, ...]
     cmd: int = 0
+    scale: float = 1.0
 
     @classmethod
     def parse(cls, text: str, lo: int, hi: int) -> PlayerReport | None:
@@ -48,7 +50,8 @@ class PlayerReport:
             d = json.loads(text)
             rep = cls(int(d["seq"]), str(d["token"]), int(d["shown"]), int(d["goal"]),
                       1 if int(d["dir"]) >= 0 else -1, bool(d["playing"]),
-                      tuple(int(f) for f in d["want"][:MAX_WANT] if lo <= int(f) <= hi), int(d.get("cmd", 0)))
+                      tuple(int(f) for f in d["want"][:MAX_WANT] if lo <= int(f) <= hi), int(d.get("cmd", 0)),
+                      min(1.0, max(0.125, float(d.get("scale", 1.0)))))
         except (ValueError, TypeError, KeyError, AttributeError):
             return None
         if not (lo <= rep.shown <= hi and lo <= rep.goal <= hi):
@@ -61,13 +64,13 @@ class BrowserPlayer:
 
     Args:
         client: the viser client (its page runs :data:`labeler.player_js.PLAYER_JS`).
-        jpeg: ``jpeg(frame) -> bytes``, the compressed frame to send.
+        jpeg: ``jpeg(frame, scale) -> bytes``, the compressed frame to send at ``scale`` of its size.
         on_report: ``on_report(report, first)`` with each new :class:`PlayerReport` on viser's event loop (must
             not block); ``first`` for the report that attaches the page.
         config: the page's configuration (see ``P.attach`` in the script), without token and channel.
     """
 
-    def __init__(self, client, jpeg: Callable[[int], bytes], on_report: Callable[[PlayerReport, bool], None],
+    def __init__(self, client, jpeg: Callable[[int, float], bytes], on_report: Callable[[PlayerReport, bool], None],
                  **config):
         self.client = client
         self.jpeg = jpeg
@@ -101,6 +104,11 @@ class BrowserPlayer:
             self._want = list(dict.fromkeys([*rep.want, *self._want]))[:4 * MAX_WANT]
         self.on_report(rep, first)
 
+    @property
+    def scale(self) -> float:
+        """The share of the frame's size the page needs (its last report; 1 before the first)."""
+        return self.last.scale if self.last is not None else 1.0
+
     def has_wanted(self) -> bool:
         with self._lock:
             return bool(self._want)
@@ -111,7 +119,8 @@ class BrowserPlayer:
             if not self._want:
                 return None
             frame = self._want.pop(0)
-        queue_js(self.client, put_frame_js(self.token, frame, self.jpeg(frame)))
+        scale = self.scale
+        queue_js(self.client, put_frame_js(self.token, frame, self.jpeg(frame, scale), scale))
         self.client.flush()
         self.sent += 1
         return frame

@@ -5,14 +5,16 @@ round trip, a decode and a texture upload after the key, and a held key lags. Th
 never built from file contents) keeps the frames in the page instead:
 
 - **a frame feed**: the server sends each frame once, compressed (``put``); the page decodes the frames
-  around the cursor ahead of time (``createImageBitmap``, off the main thread) and keeps the decoded ones
-  as textures already uploaded to the GPU (labeler) or as bitmaps (review), within a budget of pixels;
-  the page asks the server for the frames it lacks around the cursor (``want`` in its reports);
-- **the labeler's plane**: the texture of viser's frame plane (the scene node ``/frames/0``) is swapped by
-  the page and one render is requested: the step shows the new frame in a single render, with no
-  intermediate picture. J/L (Shift: ×10) step in the page; holding J or L (or Space) plays at the clip's
-  frame rate up to 60 fps, showing the newest frame ready and dropping the others rather than lagging.
-  The page then tells the server the frame shown (for overlays, status line and labels);
+  around the cursor ahead of time (``createImageBitmap``, off the main thread, at the size the view needs)
+  and keeps them as bitmaps within a budget of pixels; the page asks the server for the frames it lacks
+  around the cursor (``want`` in its reports);
+- **the labeler's frame**: a 2D canvas of ours under viser's transparent WebGL canvas, placed by a CSS
+  homography exactly where viser's frame plane (the scene node ``/frames/0``) projects, so overlays, zoom
+  and pan stay as they were; the plane itself is no longer drawn (it still takes the clicks). A step draws
+  one bitmap into our canvas: no WebGL render, no intermediate picture. J/L (Shift: ×10) step in the page;
+  holding J or L (or Space) plays at the clip's frame rate up to 60 fps, showing the newest frame ready and
+  dropping the others rather than lagging. The page then tells the server the frame shown (for overlays,
+  status line and labels);
 - **the review's clock**: one clock in the page decides the video frame drawn in the video panel (a canvas
   of ours) and moves the 3D ball to the same frame in the same animation frame (see
   :mod:`labeler.review.app`).
@@ -58,6 +60,7 @@ PLAYER_JS = r"""
     for (const e of P.entries.values()) P.drop(e, true);
     P.entries = new Map();
     P.active = false; P.playing = null; P.current = null; P.requested = new Map(); P.decoding = 0;
+    P.drawn = undefined;
   };
   P.reset();
 
@@ -80,50 +83,119 @@ PLAYER_JS = r"""
     go();
   };
 
+  // the labeler: a 2D canvas of ours under viser's (transparent) WebGL canvas, placed by a CSS homography
+  // exactly where viser's frame plane projects; the plane itself is no longer drawn (it stays for clicks),
+  // the overlays stay in WebGL above it. A step draws one bitmap into our canvas: no WebGL render at all
   P.attachPlane = (cfg) => {
     const m = P.viewer();
     const root = m && m.nodeRefFromName[cfg.node];
     let mesh = null;
     if (root) root.traverse((o) => { if (!mesh && o.isMesh && o.material && o.material.map) mesh = o; });
-    if (!mesh) return false;
-    P.mesh = mesh; P.template = mesh.material.map;
-    // every render draws our texture, whatever viser's own props say; the renderer is kept for uploads
-    mesh.onBeforeRender = (renderer) => {
-      P.renderer = renderer;
-      if (P.current && P.current.tex && mesh.material.map !== P.current.tex) mesh.material.map = P.current.tex;
-      if (!P.playing) P.sharpen();  // the view was zoomed: more pixels for the frame shown
-    };
+    if (!mesh || !m.scene || !m.camera) return false;
+    P.mesh = mesh;
+    const gl = m.canvas, wrap = gl.parentElement;
+    let c = wrap.querySelector("canvas.r3d-frame");
+    if (!c) {
+      c = document.createElement("canvas");
+      c.className = "r3d-frame";
+      c.style.cssText = "position:absolute;left:0;top:0;z-index:-1;pointer-events:none;" +
+        "transform-origin:0 0;visibility:hidden";
+      wrap.insertBefore(c, gl);
+    }
+    P.frameCanvas = c; P.ctx = c.getContext("2d");
+    if (!m.scene.__r3dFollows) {  // every render of viser's scene: follow its camera (hooked once per page)
+      m.scene.__r3dFollows = true;
+      const before = m.scene.onBeforeRender;
+      m.scene.onBeforeRender = function (...args) {
+        if (before) before.apply(this, args);
+        if (P.active && P.cfg.kind === "plane") {
+          P.place();
+          if (!P.playing) P.sharpen();  // the view was zoomed: more pixels for the frame shown
+        }
+      };
+    }
     return true;
+  };
+
+  // CSS matrix3d taking the rectangle (0, 0)-(w, h) onto the quad tl, tr, bl, br (a homography)
+  const adj = (m) => [m[4] * m[8] - m[5] * m[7], m[2] * m[7] - m[1] * m[8], m[1] * m[5] - m[2] * m[4],
+    m[5] * m[6] - m[3] * m[8], m[0] * m[8] - m[2] * m[6], m[2] * m[3] - m[0] * m[5],
+    m[3] * m[7] - m[4] * m[6], m[1] * m[6] - m[0] * m[7], m[0] * m[4] - m[1] * m[3]];
+  const mul = (a, b) => {
+    const c = new Array(9).fill(0);
+    for (let i = 0; i < 3; i++) for (let j = 0; j < 3; j++) for (let k = 0; k < 3; k++) c[3 * i + j] += a[3 * i + k] * b[3 * k + j];
+    return c;
+  };
+  const basis = (p) => {
+    const m = [p[0][0], p[1][0], p[2][0], p[0][1], p[1][1], p[2][1], 1, 1, 1];
+    const a = adj(m), v = [p[3][0], p[3][1], 1];
+    const s = [0, 1, 2].map((i) => a[3 * i] * v[0] + a[3 * i + 1] * v[1] + a[3 * i + 2] * v[2]);
+    return mul(m, [s[0], 0, 0, 0, s[1], 0, 0, 0, s[2]]);
+  };
+  P.matrix3d = (w, h, quad) => {
+    const t = mul(basis(quad), adj(basis([[0, 0], [w, 0], [0, h], [w, h]])));
+    const n = t.map((v) => v / t[8]);
+    return `matrix3d(${n[0]},${n[3]},0,${n[6]},${n[1]},${n[4]},0,${n[7]},0,0,1,0,${n[2]},${n[5]},0,1)`;
+  };
+  // where viser's plane is on screen now (CSS px of its canvas): the quad tl, tr, bl, br, or null
+  P.quad = () => {
+    const m = P.viewer(), g = P.mesh.geometry.parameters, gl = m.canvas;
+    const V = P.mesh.position.constructor, quad = [];
+    for (const [x, y] of [[-1, 1], [1, 1], [-1, -1], [1, -1]]) {
+      const v = new V(x * g.width / 2, y * g.height / 2, 0);
+      P.mesh.localToWorld(v);
+      v.project(m.camera);
+      if (!(v.z < 1)) return null;   // behind the camera
+      quad.push([(v.x + 1) / 2 * gl.clientWidth, (1 - v.y) / 2 * gl.clientHeight]);
+    }
+    return quad;
+  };
+  P.place = () => {
+    const c = P.frameCanvas;
+    if (!c || !P.mesh || P.drawn === undefined) return;
+    const quad = P.quad();
+    if (!quad) { c.style.visibility = "hidden"; return; }
+    c.style.transform = P.matrix3d(c.width, c.height, quad);
+    c.style.visibility = "visible";
+    if (P.mesh.material.visible) { P.mesh.material.visible = false; P.render(); }  // ours shows the frame now
   };
 
   // ------------------------------------------------------------------------------------- the frames
   P.entry = (f) => { let e = P.entries.get(f); if (!e) { e = {f}; P.entries.set(f, e); } return e; };
-  P.ready = (f) => { const e = P.entries.get(f); return !!(e && (e.tex || (P.cfg.kind !== "plane" && e.bitmap))); };
+  P.ready = (f) => { const e = P.entries.get(f); return !!(e && e.bitmap); };
   P.drop = (e, all) => {
     if (e === P.current && !all) return;
-    if (e.tex) { e.tex.dispose(); e.tex = null; }
     if (e.bitmap) { e.bitmap.close(); e.bitmap = null; }
     if (all) e.blob = null;
   };
-  P.put = (token, f, b64) => {
+  P.put = (token, f, b64, scale) => {
     if (token !== P.token) return;
     const bin = atob(b64);
     const bytes = new Uint8Array(bin.length);
     for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
-    P.entry(f).blob = new Blob([bytes], {type: "image/jpeg"});
+    const e = P.entry(f);
+    e.blob = new Blob([bytes], {type: "image/jpeg"}); e.blobScale = scale || 1;
     P.requested.delete(f);
+    if (e === P.current && e.bitmap && e.scale < e.blobScale && !e.loading) P.decode(e);  // sharper, for a zoom
     P.prepare();
+    if (P.requested.size <= 4) P.report(false);  // the frames asked for are coming in: ask for the next ones
   };
+  // a frame the page has, but with fewer pixels than the view needs now (a zoom): asked for again
+  P.blurry = (e) => !!(e && e.blob && e.blobScale < P.scaleNeeded() - 1e-6);
   // frames wanted around the cursor, most wanted first: the cursor, then ahead in the direction, one behind, ...
   // while playing: the frames from a little ahead of the clock (those due now arrive late) to `ahead`, then
   // those due now, then those between the frame shown and the clock (late, but shown if they come first)
-  const LEAD = 4;
+  // frames the clock moves on while a frame is decoded (at least 4): frames due sooner than that are late
+  // (at most half the frames kept ahead: a page that cannot keep up still shows every few frames)
+  const lead = () => Math.min(Math.floor(P.cfg.ahead / 2),
+    Math.max(4, Math.ceil((P.decodeMs || 100) * Math.min(P.cfg.fps * P.speed, 60) / 1000)));
   P.window = () => {
     const c = P.cfg, d = P.dir >= 0 ? 1 : -1, g = P.goal;
     let out = [];
     if (P.playing) {
-      for (let k = LEAD; k <= c.ahead; k++) out.push(g + d * k);
-      for (let k = 0; k < LEAD; k++) out.push(g + d * k);
+      const L = Math.min(lead(), c.ahead);
+      for (let k = L; k <= c.ahead; k++) out.push(g + d * k);
+      for (let k = 0; k < L; k++) out.push(g + d * k);
       for (let f = g - d; (f - P.shown) * d > 0; f -= d) out.push(f);
       if (c.loop && d > 0) out = out.map((f) => (f > c.hi ? c.lo + (f - c.hi - 1) % (c.hi - c.lo + 1) : f));
     } else {
@@ -145,7 +217,7 @@ PLAYER_JS = r"""
     // ones beyond the budget
     const need = P.scaleNeeded();
     for (const e of P.entries.values()) {
-      if ((e.tex || e.bitmap) && (!keep.has(e.f) || (e.scale < need && !e.loading))) P.drop(e, false);
+      if (e.bitmap && (!keep.has(e.f) || (e.scale < Math.min(need, e.blobScale || 1) && !e.loading))) P.drop(e, false);
     }
     if (P.entries.size > P.cfg.max_blobs) {
       const far = Array.from(P.entries.values()).sort((a, b) => Math.abs(b.f - P.goal) - Math.abs(a.f - P.goal));
@@ -154,12 +226,18 @@ PLAYER_JS = r"""
         P.drop(e, true); P.entries.delete(e.f);
       }
     }
-    const soonest = P.playing ? Array.from(keep).sort((a, b) => (a - b) * P.dir) : order;
+    // playing: decode the frames in the order they fall due, from those the clock will reach once decoded
+    let soonest = order;
+    if (P.playing) {
+      const ahead = Array.from(keep).filter((f) => (f - P.goal) * P.dir >= 0).sort((a, b) => (a - b) * P.dir);
+      const due = ahead.filter((f) => (f - P.goal) * P.dir >= 0.7 * lead());
+      soonest = due.length ? due : ahead;
+    }
     for (const f of soonest) {
-      if (P.decoding >= 2) break;
+      if (P.decoding >= 4) break;
       if (!keep.has(f)) break;
       const e = P.entries.get(f);
-      if (!e || !e.blob || e.loading || e.tex || e.bitmap) continue;
+      if (!e || !e.blob || e.loading || e.bitmap) continue;
       P.decode(e);
     }
   };
@@ -178,49 +256,50 @@ PLAYER_JS = r"""
   };
   P.decode = (e) => {
     e.loading = true; P.decoding += 1;
-    const token = P.token, scale = P.scaleNeeded();
+    const token = P.token, blobScale = e.blobScale || 1, scale = Math.min(P.scaleNeeded(), blobScale);
     const opts = {};
-    if (P.cfg.kind === "plane") opts.imageOrientation = "flipY";  // WebGL does not flip ImageBitmaps on upload
-    if (scale < 1) {
+    if (scale < blobScale - 1e-6) {  // the server sent more pixels than the view needs now
       opts.resizeWidth = Math.max(16, Math.round(P.cfg.width * scale));
       opts.resizeHeight = Math.max(16, Math.round(P.cfg.height * scale));
-      opts.resizeQuality = "medium";
+      opts.resizeQuality = "low";
     }
+    const t0 = now();
     createImageBitmap(e.blob, opts).then((bm) => {
       e.loading = false; P.decoding -= 1;
+      P.decodeMs = 0.8 * (P.decodeMs || 100) + 0.2 * (now() - t0);  // running mean of the decode latency
       if (token !== P.token || !P.entries.has(e.f)) { bm.close(); return; }
-      const sharper = !!(e.tex || e.bitmap);  // a zoom asked for more pixels: replace the picture
+      const sharper = !!e.bitmap;  // a zoom asked for more pixels: replace the picture
       if (e.bitmap) e.bitmap.close();
       e.bitmap = bm; e.scale = scale; P.lastScale = scale;
-      if (P.cfg.kind === "plane") {
-        const T = P.template;
-        const tex = new T.constructor(bm);
-        tex.colorSpace = T.colorSpace; tex.flipY = false; tex.generateMipmaps = false;
-        tex.minFilter = 1006; tex.magFilter = 1006;  // THREE.LinearFilter: no mipmaps to build per frame
-        tex.needsUpdate = true;
-        if (P.renderer && P.renderer.initTexture) P.renderer.initTexture(tex);  // upload now, not on the key
-        const old = e.tex;
-        e.tex = tex;
-        if (sharper && P.current === e) { P.mesh.material.map = tex; P.render(); }
-        if (old) old.dispose();
-      }
-      if (!sharper && e.f === P.goal && P.shown !== e.f && !P.playing) P.show(e.f);
+      if (sharper && P.current === e) P.draw(e);
+      else if (e.f === P.goal && P.drawn !== e.f && !P.playing) P.show(e.f);
       P.prepare();
-    }, (err) => { e.loading = false; P.decoding -= 1; if (!e.tex) e.blob = null; P.failed = String(err); P.prepare(); });
+    }, (err) => { e.loading = false; P.decoding -= 1; if (!e.bitmap) e.blob = null; P.failed = String(err); P.prepare(); });
   };
-  P.sharpen = () => {  // the frame shown, decoded again with the pixels a zoom needs
+  P.sharpen = () => {  // the frame shown, with the pixels a zoom needs: decoded again, or asked for again
     const e = P.current;
-    if (e && e.blob && !e.loading && e.scale !== undefined && e.scale < P.scaleNeeded()) P.decode(e);
+    if (!e || !e.blob || e.loading || e.scale === undefined || e.scale >= P.scaleNeeded()) return;
+    if (P.blurry(e)) P.report(false); else P.decode(e);
   };
 
   // ------------------------------------------------------------------------------------ the cursor
+  P.draw = (e) => {
+    if (P.cfg.kind !== "plane") { P.drawReview(e); P.drawn = e.f; return; }
+    const c = P.frameCanvas, bm = e.bitmap;
+    if (c.width !== bm.width || c.height !== bm.height) { c.width = bm.width; c.height = bm.height; }
+    P.ctx.drawImage(bm, 0, 0);
+    const first = P.drawn === undefined;
+    P.drawn = e.f;
+    if (first || c.style.visibility === "hidden") P.place();
+    else if (c.width * c.height && c.dataset.size !== c.width + "x" + c.height) P.place();
+    c.dataset.size = c.width + "x" + c.height;
+  };
   P.clamp = (f) => Math.max(P.cfg.lo, Math.min(P.cfg.hi, Math.round(f)));
   P.show = (f) => {
     const e = P.entries.get(f);
     if (!e || !P.ready(f)) return false;
     P.current = e; P.shown = f;
-    if (P.cfg.kind === "plane") { P.mesh.material.map = e.tex; P.render(); }
-    else P.drawReview(e);
+    P.draw(e);
     P.report(false);
     return true;
   };
@@ -292,14 +371,14 @@ PLAYER_JS = r"""
     for (const f of P.window()) {
       if (inflight + want.length >= (P.playing ? 2 * P.cfg.ahead : 8)) break;
       const e = P.entries.get(f);
-      if ((e && e.blob) || P.requested.has(f)) continue;
+      if ((e && e.blob && !P.blurry(e)) || P.requested.has(f)) continue;
       want.push(f); P.requested.set(f, t);
     }
     const m = P.viewer();
     if (!m) return;
     P.seq += 1;
     const msg = {seq: P.seq, token: P.token, shown: P.shown, goal: P.goal, dir: P.dir,
-                 playing: !!P.playing, cmd: P.cmd || 0, want: want};
+                 playing: !!P.playing, cmd: P.cmd || 0, scale: P.scaleNeeded(), want: want};
     m.sendMessage({type: "GuiUpdateMessage", uuid: P.cfg.channel, updates: {value: JSON.stringify(msg)}});
   };
 
@@ -396,7 +475,35 @@ def call_player(client, method: str, *args) -> None:
     queue_js(client, f"window.__r3dPlayer && window.__r3dPlayer.{method}({', '.join(json.dumps(a) for a in args)});")
 
 
-def put_frame_js(token: str, frame: int, jpeg: bytes) -> str:
-    """The page call that hands it one compressed frame."""
+def put_frame_js(token: str, frame: int, jpeg: bytes, scale: float = 1.0) -> str:
+    """The page call that hands it one compressed frame (``scale``: its share of the full size)."""
     return (f"window.__r3dPlayer && window.__r3dPlayer.put({json.dumps(token)}, {int(frame)}, "
-            f"\"{base64.b64encode(jpeg).decode('ascii')}\");")
+            f"\"{base64.b64encode(jpeg).decode('ascii')}\", {float(scale)!r});")
+
+
+PROBE_JS = r"""
+(pts) => {
+  // grey levels of the picture on screen at CSS pixels `pts` of viser's canvas: from the page player's frame
+  // canvas where it shows the frame (mapped through its on-screen box), else from viser's WebGL drawing buffer
+  const gl = document.querySelector('canvas[data-engine^="three.js"]');
+  const own = gl.parentElement.querySelector("canvas.r3d-frame");
+  const g = gl.getBoundingClientRect();
+  if (own && own.style.visibility === "visible") {
+    const r = own.getBoundingClientRect(), ctx = own.getContext("2d");
+    return pts.map(([x, y]) => {
+      const u = Math.floor((x + g.left - r.left) / r.width * own.width);
+      const v = Math.floor((y + g.top - r.top) / r.height * own.height);
+      const d = ctx.getImageData(Math.max(0, Math.min(own.width - 1, u)), Math.max(0, Math.min(own.height - 1, v)), 1, 1).data;
+      return (d[0] + d[1] + d[2]) / 3;
+    });
+  }
+  const c = gl.getContext("webgl2") || gl.getContext("webgl"), one = new Uint8Array(4);
+  const s = c.drawingBufferWidth / gl.clientWidth, H = c.drawingBufferHeight;
+  return pts.map(([x, y]) => {
+    c.readPixels(Math.round(x * s), H - 1 - Math.round(y * s), 1, 1, c.RGBA, c.UNSIGNED_BYTE, one);
+    return (one[0] + one[1] + one[2]) / 3;
+  });
+}
+"""
+"""For tests and benchmarks: ``page.evaluate(PROBE_JS, points)`` reads the picture on screen (the frame's own
+canvas, or viser's WebGL buffer before the page's player draws) at CSS pixels of viser's canvas."""

@@ -139,7 +139,7 @@ class Session:
         """Whether the page's player plays (attached); else the server's thread does."""
         return self.player.attached
 
-    def _jpeg(self, frame: int) -> bytes:
+    def _jpeg(self, frame: int, _scale: float = 1.0) -> bytes:  # the video panel: always the whole frame
         return encode_jpeg(self.app.frames.get(frame), 80)
 
     def _on_report(self, rep: PlayerReport, first: bool) -> None:
@@ -230,11 +230,9 @@ class Session:
                 if self.player.send_next() is None:
                     break
             with self.lock:
-                frame, playing = self.playback.frame, self.playback.playing
+                frame = self.playback.frame
             if frame != self._drawn:
                 self._draw(frame)
-            if bool(self.panel.play.value) != playing:
-                self._quietly(self.panel.play, playing)
             return
         with self.lock:
             was_playing = self.playback.playing

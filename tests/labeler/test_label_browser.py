@@ -12,6 +12,7 @@ from inference.camera import Camera
 from inference.clipio import Clip
 from labeler.app import LabelerApp
 from labeler.frames import code_cell_centres, read_frame_code
+from labeler.player_js import PROBE_JS
 from labeler.viewer_common import screen_of_pixel
 
 pytestmark = pytest.mark.browser
@@ -107,22 +108,6 @@ def test_two_tabs_on_one_clip_keep_both_edits(app_and_clip, viser_page):
     wait_until(lambda: 1 in view_a.session.ball, what="tab A picking up B's row")
 
 
-READ_JS = """
-(pts) => {
-  const src = document.querySelector('canvas[data-engine^="three.js"]');
-  const probe = document.createElement("canvas");
-  probe.width = src.width; probe.height = src.height;
-  const ctx = probe.getContext("2d", {willReadFrequently: true});
-  ctx.drawImage(src, 0, 0);
-  return pts.map(([x, y]) => {
-    const d = ctx.getImageData(Math.round(x), Math.round(y), 1, 1).data;
-    return (d[0] + d[1] + d[2]) / 3;
-  });
-}
-"""
-"""Grey levels of the WebGL canvas at the given CSS pixels (the page is opened at a device pixel ratio of 1)."""
-
-
 def test_page_player_steps_plays_while_held_and_keeps_the_colours(app_and_clip, viser_page):
     """J/L step in the page (the frame code read from the canvas names the new frame, and the server hears of
     it); the page's own texture shows frame 0 as viser's did; holding L plays, releasing stops; Space plays
@@ -139,7 +124,7 @@ def test_page_player_steps_plays_while_held_and_keeps_the_colours(app_and_clip, 
     n_bits = len(cells)
 
     def read() -> tuple[int, np.ndarray]:
-        levels = page.evaluate(READ_JS, np.concatenate([cells, grid]).tolist())
+        levels = page.evaluate(PROBE_JS, np.concatenate([cells, grid]).tolist())
         return read_frame_code(levels[:n_bits]), np.asarray(levels[n_bits:])
 
     wait_until(lambda: read()[0] == 0, what="frame 0's code on the canvas")
