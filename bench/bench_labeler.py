@@ -14,8 +14,9 @@ For synthetic H.264 clips (``rally3d synth``, generated into a temporary folder)
   - ``L`` (one frame) and ``Shift+L`` (ten frames), each after a pause on the frame;
   - **holding L** for 3 s: frames per second shown while held (distinct codes read per second after the first
     change) and the largest lag behind the clip's clock;
-  - **intermediate renders**: animation frames during a step whose picture changed while the code still read
-    the old number (the old picture drawn again, e.g. moved), counted over all steps;
+  - **intermediate renders**: steps with an animation frame, between the key and the new frame, whose
+    picture is not the old one (another code read, or the old code over changed pixels: the old picture
+    drawn again moved, or a blank);
 
   for each variant: ``page`` (the page's frame player, :mod:`labeler.player_js`) and ``server`` (a JPEG sent
   per step, the fallback), each idle and with a CPU-bound job beside it (one busy process per core).
@@ -209,9 +210,11 @@ def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s
                 before = [r for r in log if r[0] < key_t]
                 ref = np.asarray(before[-1][2] if before else log[0][2])
                 old = before[-1][1] if before else None
-                for r in log:  # the old number still read, but the picture changed: an intermediate render
-                    if key_t <= r[0] < first[0] and r[1] == old and np.abs(np.asarray(r[2]) - ref).max() > 40:
+                for r in log:  # before the new frame: another picture than the old one (an intermediate render)
+                    if key_t <= r[0] < first[0] and (r[1] != old or np.abs(np.asarray(r[2]) - ref).max() > 40):
                         out["intermediate"] += 1
+                        print(f"  intermediate picture: key {key} from {old} to {expect}: code {r[1]} read "
+                              f"{r[0] - key_t:.0f} ms after the key", file=sys.stderr)
                         break
                 return (first[0] - key_t) / 1000
 

@@ -203,6 +203,7 @@ PLAYER_JS = r"""
       for (let k = 1; k <= Math.max(c.ahead, c.behind); k++) {
         if (k <= c.ahead) out.push(g + d * k);
         if (k <= c.behind) out.push(g - d * k);
+        if (k === 2) out.push(g + 10 * d, g - 10 * d);  // where Shift+L / Shift+J go
       }
     }
     return out.filter((f) => f >= c.lo && f <= c.hi);
