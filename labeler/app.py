@@ -4,8 +4,8 @@ Callbacks only change the tab's :class:`~labeler.state.LabelSession` or its requ
 tab's render thread for an update; the thread renders the newest request only (auto-repeat of a step key
 coalesces), inside ``client.atomic()``, and prefetches the frames around it.
 
-Stepping happens in the page (:mod:`labeler.player_js`): the page holds the frames around the cursor, swaps
-the picture on J/L in one render and reports the frame shown; the render thread then draws that frame's
+Stepping happens in the page (:mod:`labeler.player_js`): the page holds the frames around the cursor, draws
+the new one into its own canvas on J/L (no 3D render) and reports the frame shown; the render thread then draws that frame's
 overlays and status, and sends the frames the page asks for. Until the page's player attaches (or if it
 cannot), the thread shows each frame itself by sending its JPEG.
 """
@@ -39,7 +39,7 @@ MAX_KEYFRAME_MARKS = 40
 PAGE_AHEAD, PAGE_BEHIND = 16, 6
 """Frames the page keeps ready ahead of the cursor (in the stepping direction) and behind it."""
 PAGE_BUDGET_PX = 64e6
-"""Decoded pixels the page keeps as textures (≈ 256 MB: 30 frames at 1080p, 7 at 4K)."""
+"""Decoded pixels the page keeps (≈ 256 MB of bitmaps, at the size the view needs: ≥ 30 frames at 1080p)."""
 PLAYING_DRAW_S = 0.5
 """While the page plays, overlays and status follow it at most this often (each update re-renders the page's
 panel, which would take the time the page needs for its frames)."""
@@ -188,7 +188,7 @@ class ClientView:
             self.direction = 1 if frame >= self.cursor else -1
             self.target = frame
             if self.paged:
-                self._go = frame
+                self._go = self.page_goal = frame  # the page goes there (a second step counts from it)
             self._requested_at.setdefault(frame, time.perf_counter())
             self._cond.notify_all()
         self.app.note_place(self)
@@ -607,8 +607,7 @@ class ClientView:
                     self.player.send_next()
                 except Exception as e:
                     self._notice(f"⚠ could not send a frame to the page: {e}")
-                    with self.player._lock:
-                        self.player._want.clear()
+                    self.player.clear_wanted()
 
     def _sync_from_disk(self) -> None:
         with self.lock:

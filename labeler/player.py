@@ -113,6 +113,11 @@ class BrowserPlayer:
         with self._lock:
             return bool(self._want)
 
+    def clear_wanted(self) -> None:
+        """Forget the frames asked for (the page asks again for those it still lacks)."""
+        with self._lock:
+            self._want.clear()
+
     def send_next(self) -> int | None:
         """Send the most wanted frame the page lacks; returns it (None when nothing is wanted)."""
         with self._lock:
