@@ -1,11 +1,11 @@
-"""The frame on screen: one image node of viser's scene, whose picture the page's player swaps.
+"""The frame's image node in viser's scene: shows the frame until the page's player takes over, then takes the clicks.
 
 Before the page's frame player (:mod:`labeler.player_js`) has attached, the server shows a frame by
-replacing the node's JPEG (the browser decodes and uploads it after the key). Once attached, the page
-keeps the frames around the cursor as uploaded textures and swaps the node's texture itself; the server
-then never touches the node's picture again. Every frame carries its number (and its binary code) burned
-into the picture (:func:`labeler.frames.stamp_frame_number`), so the number on screen always belongs to
-the image shown.
+replacing the node's JPEG (the browser decodes and uploads it after the key). Once attached, the page draws
+the frames into a canvas of its own placed exactly under this node's place on screen, and stops drawing the
+node; the node stays in the scene for the clicks, and the server never touches its picture again. Every
+frame carries its number (and its binary code) burned into the picture
+(:func:`labeler.frames.stamp_frame_number`), so the number on screen always belongs to the image shown.
 """
 from __future__ import annotations
 
