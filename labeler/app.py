@@ -110,8 +110,6 @@ class ClientView:
         self._play_box_stale = False
         self._closed = False
         self._cond = threading.Condition()
-        self.step_times: list[float] = []  # seconds from a step request to its frame sent (for the bench)
-        self._requested_at: dict[int, float] = {}
         self._detector_thread: threading.Thread | None = None
         self._shortcuts = None
 
@@ -189,7 +187,6 @@ class ClientView:
             self.target = frame
             if self.paged:
                 self._go = self.page_goal = frame  # the page goes there (a second step counts from it)
-            self._requested_at.setdefault(frame, time.perf_counter())
             self._cond.notify_all()
         self.app.note_place(self)
 
@@ -586,9 +583,6 @@ class ClientView:
                     draw = self._overlay_dirty or self._gui_dirty or frame != self._drawn or \
                         (not paged and frame != self.shown)
                     self._overlay_dirty = self._gui_dirty = False
-                    requested = self._requested_at.pop(frame, None) if draw else None
-                    if draw:
-                        self._requested_at.clear()
             if idle:  # outside the condition: syncing takes the session lock (lock order: session, then cond)
                 self._sync_from_disk()
                 continue
@@ -600,8 +594,6 @@ class ClientView:
                 except Exception as e:  # a failing frame is reported, the labeler goes on
                     self._notice(f"⚠ could not show frame {frame}: {e}")
                     self.shown = self._drawn = frame
-                if requested is not None:
-                    self.step_times.append(time.perf_counter() - requested)
             elif paged:
                 try:
                     self.player.send_next()

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections import OrderedDict, deque
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -82,14 +80,6 @@ def eighths(scale: float) -> int:
     return int(min(8, max(1, math.ceil(float(scale) * 8 - 1e-6))))
 
 
-@dataclass
-class FrameTiming:
-    """Seconds spent decoding and encoding the last frame served without the cache (for the bench)."""
-
-    decode_s: float = 0.0
-    encode_s: float = 0.0
-
-
 class FrameCache:
     """JPEG frames of one clip with an LRU cache and a prefetch thread.
 
@@ -117,7 +107,6 @@ class FrameCache:
         self._queue: deque[tuple[int, int]] = deque()
         self._wake = threading.Condition(self._lock)
         self._stopped = False
-        self.last = FrameTiming()
         self._thread = None
         if prefetch:
             self._thread = threading.Thread(target=self._worker, name=f"prefetch-{clip.root.name}", daemon=True)
@@ -135,11 +124,6 @@ class FrameCache:
     def cached(self, index: int, scale: float = 1.0) -> bool:
         with self._lock:
             return (int(index), eighths(scale)) in self._jpeg
-
-    def peek(self, index: int, scale: float = 1.0) -> bytes | None:
-        """JPEG bytes of frame ``index`` if already cached, else None (never decodes)."""
-        with self._lock:
-            return self._jpeg.get((int(index), eighths(scale)))
 
     def get(self, index: int, scale: float = 1.0) -> bytes:
         """JPEG bytes of frame ``index`` (cached, or decoded and encoded now), at ``scale`` of its size
@@ -163,7 +147,6 @@ class FrameCache:
             with self._lock:  # another thread may have produced it while we waited
                 if key in self._jpeg:
                     return self._jpeg[key]
-            t0 = time.perf_counter()
             rgb = self._source.read(index)
             if self.stamp:
                 rgb = stamp_frame_number(rgb, index)
@@ -171,9 +154,7 @@ class FrameCache:
                 h, w = rgb.shape[:2]
                 rgb = cv2.resize(rgb, (max(16, round(w * eighth / 8)), max(16, round(h * eighth / 8))),
                                  interpolation=cv2.INTER_AREA)
-            t1 = time.perf_counter()
             data = encode_jpeg(rgb, self.quality)
-            self.last = FrameTiming(t1 - t0, time.perf_counter() - t1)
         with self._lock:
             self._jpeg[key] = data
             self._jpeg.move_to_end(key)

@@ -117,7 +117,6 @@ class Session:
         first = app.frames.get(self.playback.frame)
         self.info = populate_info(gui, first, d.analysis, d.summary())
         self.dl_replay, self.dl_csv = populate_export(gui)
-        self._syncing = False
         self.shown = -1  # the frame whose ball and video were last shown together
         self._drawn = -1  # the frame whose trail, players and shot text were drawn last (page playback)
         self._attached_now = False
@@ -156,17 +155,19 @@ class Session:
     def _wire(self) -> None:
         p = self.panel
 
+        # viser also runs these when the server sets the value (the timeline follows playback): only the
+        # viewer's own changes act
         @p.frame.on_update
-        def _(_ev) -> None:
-            if self._syncing:
+        def _(ev) -> None:
+            if ev.client is None:
                 return
             with self.lock:
                 self.playback.seek(int(p.frame.value))
             self.render(from_slider=True)
 
         @p.play.on_update
-        def _(_ev) -> None:
-            if self._syncing:
+        def _(ev) -> None:
+            if ev.client is None:
                 return
             self._play(bool(p.play.value))
 
@@ -213,7 +214,7 @@ class Session:
     def _set_play(self, playing: bool) -> None:
         """Play or pause, and show it in the checkbox (without its callback)."""
         self._play(playing)
-        self._quietly(self.panel.play, playing)
+        self.panel.play.value = playing
 
     def tick(self, dt: float) -> None:
         """Page playback: draw the server's parts for the frame the page reported. Before the page attaches:
@@ -258,15 +259,7 @@ class Session:
         self.info.current.content = current_shot_markdown(d.analysis, f)
         self._drawn = f
         if not from_slider:
-            self._quietly(self.panel.frame, f)
-
-    def _quietly(self, handle, value) -> None:
-        """Set a panel input's value without running its callback's effect."""
-        self._syncing = True
-        try:
-            handle.value = value
-        finally:
-            self._syncing = False
+            self.panel.frame.value = f
 
     def render(self, from_slider: bool = False) -> None:
         """Show the current frame: ball, trail, players, video overlay, shot text, slider position (once the
