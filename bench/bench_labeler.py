@@ -12,8 +12,10 @@ For synthetic H.264 clips (``rally3d synth``, generated into a temporary folder)
   reading for every variant:
 
   - ``L`` (one frame) and ``Shift+L`` (ten frames), each after a pause on the frame;
-  - **holding L** for 3 s: frames per second shown while held (distinct codes read per second after the first
-    change) and the largest lag behind the clip's clock;
+  - **holding L** for 3 s: frames per second shown while playing (distinct codes read per second from the
+    first played frame: the key's own step and the 0.35 s before playing starts are left out) and the largest
+    lag behind the clip's clock; then **holding J** from the last frame (End), through frames the server has
+    not decoded yet (a backward seek in H.264 decodes from the previous key frame);
   - **intermediate renders**: steps with an animation frame, between the key and the new frame, whose
     picture is not the old one (another code read, or the old code over changed pixels: the old picture
     drawn again moved, or a blank);
@@ -155,7 +157,8 @@ def make_app(clip_dir: Path, port: int, variant: str):
 
 
 def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s: float) -> dict:
-    """One browser session: ``steps`` × L, ``steps // 3`` × Shift+L, then L held for :data:`HOLD_S` seconds."""
+    """One browser session: ``steps`` × L, ``steps // 3`` × Shift+L, L held for :data:`HOLD_S` seconds, then End and
+    J held as long."""
     from playwright.sync_api import sync_playwright
 
     from labeler.frames import code_cell_centres
@@ -228,21 +231,32 @@ def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s
                 dt = step("Shift+L", frame)
                 if dt is not None:
                     out["ten"].append(dt)
-            time.sleep(1.0)
-            t0 = page.evaluate("performance.now()")
-            page.keyboard.down("l")
-            time.sleep(HOLD_S)
-            page.keyboard.up("l")
-            time.sleep(0.5)
-            log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t0})")
-            changes = [(t, n) for (t, n, _), (_, m, _) in zip(log[1:], log[:-1]) if n != m]
-            if len(changes) >= 2:
+            def hold(key: str) -> dict:
+                """Hold ``key`` for HOLD_S: the rate of distinct frames shown once playing (the first change
+                is the key's own step; playing starts 0.35 s later), the frames it moved, its largest lag."""
+                time.sleep(1.0)
+                t0 = page.evaluate("performance.now()")
+                page.keyboard.down(key)
+                time.sleep(HOLD_S)
+                page.keyboard.up(key)
+                time.sleep(0.5)
+                log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t0})")
+                changes = [(t, n) for (t, n, _), (_, m, _) in zip(log[1:], log[:-1]) if n != m][1:]
+                if len(changes) < 2:
+                    return {}
                 span = (changes[-1][0] - changes[0][0]) / 1000
-                out["hold_fps"] = (len(changes) - 1) / max(span, 1e-3)
-                out["hold_frames"] = changes[-1][1] - changes[0][1]
-                # lag: how far the frame shown is behind a clock started at the first change
-                out["hold_lag"] = max(0.0, max((t - changes[0][0]) / 1000 * fps - (n - changes[0][1])
-                                               for t, n in changes) / fps)
+                sign = 1 if changes[-1][1] >= changes[0][1] else -1
+                return {"fps": (len(changes) - 1) / max(span, 1e-3),
+                        "frames": abs(changes[-1][1] - changes[0][1]),
+                        # lag: how far the frame shown is behind a clock started at the first played frame
+                        "lag": max(0.0, max((t - changes[0][0]) / 1000 * fps - sign * (n - changes[0][1])
+                                            for t, n in changes) / fps)}
+
+            out["hold"] = hold("l")
+            last = view.session.n_frames - 1
+            page.keyboard.press("End")  # backwards from frames not decoded yet: the video is sought back
+            wait_for(lambda: shown_code() == last, f"the last frame ({last}) on screen", 60)
+            out["back"] = hold("j")
             browser.close()
     finally:
         app.stop()
@@ -260,7 +274,7 @@ def main() -> int:
     ap.add_argument("--loads", default="idle,busy")
     args = ap.parse_args()
     steps = args.steps
-    frames = steps + 10 * max(steps // 3, 3) + int(HOLD_S * 30 * 1.5) + 20
+    frames = steps + 10 * max(steps // 3, 3) + 2 * int(HOLD_S * 30 * 1.2) + 20  # the J hold starts beyond the L one
     tmp = Path(tempfile.mkdtemp(prefix="bench_labeler_"))
     rows = []
 
@@ -284,9 +298,10 @@ def main() -> int:
                     tag = f"{variant}, {load}"
                     row(size, f"L → new frame on screen ({tag})", stats(r["one"]))
                     row(size, f"Shift+L → frame +10 on screen ({tag})", stats(r["ten"]))
-                    hold = (f"{r['hold_fps']:8.1f} {r['hold_lag'] * 1000:8.0f}" if "hold_fps" in r
-                            else f"{'–':>8} {'–':>8}")
-                    row(size, f"hold L: frames/s shown | max lag ms ({tag})", hold)
+                    for key, what in (("hold", "hold L"), ("back", "hold J from the end")):
+                        h = r.get(key) or {}
+                        figs = f"{h['fps']:8.1f} {h['lag'] * 1000:8.0f}" if h else f"{'–':>8} {'–':>8}"
+                        row(size, f"{what}: frames/s shown | max lag ms ({tag})", figs)
                     row(size, f"intermediate renders | steps missed ({tag})",
                         f"{r['intermediate']:8d} {r['missed']:8d}")
     finally:

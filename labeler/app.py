@@ -114,8 +114,8 @@ class ClientView:
         self._shortcuts = None
 
         self.frame_node = FramePlane(client.scene, self.plane, self._on_click)
-        self.player = BrowserPlayer(client, self.frames.get, self._on_report, kind="plane", node=NODE, lo=0,
-                                    hi=s.n_frames - 1, fps=float(s.fps), first=0, ahead=PAGE_AHEAD,
+        self.player = BrowserPlayer(client, self._page_jpeg, self._on_report, pick=self.frames.next_to_serve,
+                                    kind="plane", node=NODE, lo=0, hi=s.n_frames - 1, fps=float(s.fps), first=0, ahead=PAGE_AHEAD,
                                     behind=PAGE_BEHIND, budget_px=PAGE_BUDGET_PX,
                                     max_blobs=max(32, int(PAGE_MAX_BLOBS * 1920 * 1080 / (s.width * s.height))),
                                     width=s.width, height=s.height, render_height=self.plane.render_height,
@@ -255,6 +255,11 @@ class ClientView:
                 self.set_playing(False)
             else:
                 self.step(1)
+
+    def _page_jpeg(self, frame: int, scale: float) -> bytes:
+        """A frame for the page, at ``scale``; decoded in runs when the page goes backwards."""
+        rep = self.player.last
+        return self.frames.get(frame, scale, backward=rep is not None and rep.direction < 0)
 
     def _on_report(self, rep: PlayerReport, first: bool) -> None:
         """The page showed ``rep.shown`` (viser's event loop: only records it and wakes the render thread).
@@ -560,10 +565,14 @@ class ClientView:
         if self._overlay_dirty or self._gui_dirty or self._go is not None:
             return True
         if self.paged:
-            due = self.shown != self._drawn and \
-                (not self.playing or time.monotonic() - self._drawn_at >= PLAYING_DRAW_S)
-            return due or self.player.has_wanted()
+            return self._page_frame_due() or self.player.has_wanted()
         return self.target != self.shown
+
+    def _page_frame_due(self) -> bool:
+        """Whether the page's frame needs its overlays drawn (call holding ``_cond``): a frame not drawn yet,
+        at most every :data:`PLAYING_DRAW_S` while the page plays (each draw re-renders the 3D scene)."""
+        return self.shown != self._drawn and \
+            (not self.playing or time.monotonic() - self._drawn_at >= PLAYING_DRAW_S)
 
     def _render_loop(self) -> None:
         while True:
@@ -580,8 +589,8 @@ class ClientView:
                     paged = self.paged
                     frame = self.shown if paged else self.target
                     direction = self.direction
-                    draw = self._overlay_dirty or self._gui_dirty or frame != self._drawn or \
-                        (not paged and frame != self.shown)
+                    draw = self._overlay_dirty or self._gui_dirty or \
+                        (self._page_frame_due() if paged else frame != self._drawn or frame != self.shown)
                     self._overlay_dirty = self._gui_dirty = False
             if idle:  # outside the condition: syncing takes the session lock (lock order: session, then cond)
                 self._sync_from_disk()
@@ -609,17 +618,27 @@ class ClientView:
                 self.session.notices.append(f"⚠ could not re-read the clip files: {e}")
 
     def _render(self, frame: int, direction: int, paged: bool) -> None:
-        """Draw ``frame``'s overlays and status; show its picture too unless the page shows it."""
+        """Draw ``frame``'s overlays and status; show its picture too unless the page shows it.
+
+        While the page plays, only the status follows it (:data:`PLAYING_DRAW_S`), and the overlays of one
+        frame (ball, proposal, trail, stationary balls) are hidden until it stops: drawn twice a second they
+        would sit on frames they do not belong to, and each draw re-renders the 3D scene, which costs the
+        page the frames it plays (in software WebGL). The court stays."""
+        playing = paged and self.playing
         with self.lock, self.client.atomic():
             if not paged:
                 self.frame_node.show(frame, self.frames.get)
-            self.overlay.draw(self.session, frame, mode=self.mode, trail_length=int(self.ball_panel.trail.value),
-                              show_court=bool(self.court_panel.show.value) or self.mode == "court",
-                              selected_point=str(self.court_panel.point.value) if self.mode == "court" else None)
+            if playing:
+                self.overlay.hide_frame_layers()
+            else:
+                self.overlay.draw(self.session, frame, mode=self.mode, trail_length=int(self.ball_panel.trail.value),
+                                  show_court=bool(self.court_panel.show.value) or self.mode == "court",
+                                  selected_point=str(self.court_panel.point.value) if self.mode == "court" else None)
             self._refresh_gui(frame)
         if not paged:
             self.shown = frame
-        self._drawn, self._drawn_at = frame, time.monotonic()
+        # while playing no frame's overlays are drawn: the frame where it stops gets them at once
+        self._drawn, self._drawn_at = (-1 if playing else frame), time.monotonic()
         self.client.flush()
         if self.use_page and not self.player.attached and not self._attach_sent:
             self._attach_sent = True   # the node has its first picture: the page's player can take it over
@@ -627,7 +646,9 @@ class ClientView:
             self.player.attach()
         if self.follow:
             self._follow_ball(frame)
-        self.frames.prefetch(frame, direction, self.player.scale if paged else 1.0)
+        if not (paged and self.playing):  # a playing page asks for its own frames (the one drawn here is
+            # already behind it: prefetching around it would seek the video back)
+            self.frames.prefetch(frame, direction, self.player.scale if paged else 1.0)
 
     def _refresh_gui(self, frame: int) -> None:
         s = self.session

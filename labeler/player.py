@@ -71,9 +71,10 @@ class BrowserPlayer:
     """
 
     def __init__(self, client, jpeg: Callable[[int, float], bytes], on_report: Callable[[PlayerReport, bool], None],
-                 **config):
+                 *, pick: Callable[..., int] | None = None, **config):
         self.client = client
         self.jpeg = jpeg
+        self.pick = pick
         self.on_report = on_report
         self.config = dict(config)
         self.lo, self.hi = int(config["lo"]), int(config["hi"])
@@ -100,8 +101,10 @@ class BrowserPlayer:
         first = self.last is None
         self.attached = True
         self.last = rep
-        with self._lock:  # the new wants first, then those of earlier reports not sent yet (asked for once)
-            self._want = list(dict.fromkeys([*rep.want, *self._want]))[:4 * MAX_WANT]
+        with self._lock:  # the new wants first, then those of earlier reports not sent yet (asked for once;
+            # while playing, only those still ahead of the frame shown: the page has dropped the others)
+            older = [f for f in self._want if not rep.playing or (f - rep.shown) * rep.direction > 0]
+            self._want = list(dict.fromkeys([*rep.want, *older]))[:4 * MAX_WANT]
         self.on_report(rep, first)
 
     @property
@@ -119,12 +122,21 @@ class BrowserPlayer:
             self._want.clear()
 
     def send_next(self) -> int | None:
-        """Send the most wanted frame the page lacks; returns it (None when nothing is wanted)."""
+        """Send a frame the page lacks; returns it (None when nothing is wanted). The most wanted one, or the
+        one ``pick(wanted, scale, first=...)`` chooses (a cheaper one to decode first: see
+        :meth:`labeler.frames.FrameCache.next_to_serve`); ``first`` when the most wanted frame is the one the
+        page is going to (an annotator waits for it)."""
         with self._lock:
             if not self._want:
                 return None
-            frame = self._want.pop(0)
-        scale = self.scale
+            wanted = list(self._want)
+        scale, rep = self.scale, self.last
+        frame = wanted[0]
+        if self.pick is not None:
+            frame = self.pick(wanted, scale, first=rep is None or frame == rep.goal)
+        with self._lock:
+            if frame in self._want:
+                self._want.remove(frame)
         queue_js(self.client, put_frame_js(self.token, frame, self.jpeg(frame, scale), scale))
         self.client.flush()
         self.sent += 1

@@ -55,6 +55,27 @@ PLAYER_JS = r"""
     return null;
   };
   P.render = () => { const m = P.viewer(); if (m) m.requestRender(); };
+  // viser handles its messages inside a render of the 3D scene (except GUI-only batches), and each request
+  // for one renders for a while: every frame sent to the page would re-render the scene (in software WebGL
+  // the dearest work of playing). Calls to this player touch no 3D state: a batch of nothing but them and
+  // GUI value updates (the status line following the page) is handled at once, as viser handles GUI-only
+  // batches, without a render
+  const OURS = "window.__r3dPlayer && window.__r3dPlayer.";
+  const quietMessage = (msg) => !!msg && (msg.type === "GuiUpdateMessage" ||
+    (msg.type === "RunJavascriptMessage" && String(msg.source).startsWith(OURS)));
+  P.quiet = (m) => {
+    if (m.__r3dQuiet === m.requestRender) return;
+    const request = m.requestRender;
+    m.requestRender = m.__r3dQuiet = function (...args) {
+      const q = m.messageQueue, drain = m.drainMessageQueue;
+      if (Array.isArray(q) && q.length && drain && m.getRenderRequestState === "ready" &&
+          q.every(quietMessage)) {
+        drain();
+        return;
+      }
+      return request.apply(this, args);
+    };
+  };
 
   P.reset = () => {
     for (const e of P.entries.values()) P.drop(e, true);
@@ -78,6 +99,7 @@ PLAYER_JS = r"""
       const ok = cfg.kind === "plane" ? P.attachPlane(cfg) : P.attachReview(cfg);
       if (!ok) { if (++tries < 400) setTimeout(go, 50); return; }
       P.active = true;
+      P.quiet(P.viewer());
       P.report(true);
     };
     go();
@@ -170,9 +192,13 @@ PLAYER_JS = r"""
   };
   P.put = (token, f, b64, scale) => {
     if (token !== P.token) return;
-    const bin = atob(b64);
-    const bytes = new Uint8Array(bin.length);
-    for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+    let bytes;
+    if (Uint8Array.fromBase64) bytes = Uint8Array.fromBase64(b64);  // native: 20× faster than the loop
+    else {
+      const bin = atob(b64);
+      bytes = new Uint8Array(bin.length);
+      for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+    }
     const e = P.entry(f);
     e.blob = new Blob([bytes], {type: "image/jpeg"}); e.blobScale = scale || 1;
     P.requested.delete(f);

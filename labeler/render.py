@@ -232,6 +232,14 @@ class Overlay:
     def clear(self, name: str) -> None:
         self.lines(name, np.empty((0, 2, 2)), (0, 0, 0))
 
+    FRAME_LAYERS = ("ball", "proposal", "trail", "inactive")
+    """The layers that belong to one frame (:meth:`draw` draws them again)."""
+
+    def hide_frame_layers(self) -> None:
+        """Hide the layers of one frame (:data:`FRAME_LAYERS`; messages only for those still shown)."""
+        for name in self.FRAME_LAYERS:
+            self.clear(name)
+
     def draw(self, session: LabelSession, frame: int, *, mode: str, trail_length: int = 15,
              show_court: bool = True, selected_point: str | None = None) -> None:
         """All overlays of ``frame``: ball, proposal, trail, stationary balls, court model and residuals."""

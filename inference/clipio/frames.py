@@ -142,6 +142,13 @@ class FrameSource(ABC):
             raise IndexError(f"frame {index} out of range: valid frames are 0..{n - 1} (or -{n}..-1)")
         return i
 
+    def seek_free(self, index: int) -> bool:
+        """Whether reading frame ``index`` now needs no seek (it is cached, or the decoder reaches it by
+        decoding forward a few frames). A caller with several frames to read can read these first, and the
+        rest in ascending order, instead of seeking back and forth (a backward seek in H.264 decodes from
+        the previous key frame)."""
+        return True
+
     @abstractmethod
     def _decode(self, index: int) -> np.ndarray:
         """Decode frame ``index`` (already range-checked)."""
@@ -251,6 +258,14 @@ class VideoFrames(FrameSource):
             raise self._decode_error(index)
         self._next = index + 1
         return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+    def seek_free(self, index: int) -> bool:
+        if not 0 <= index < len(self):
+            return False
+        if index in self._cache:
+            return True
+        source = index if self._map is None else int(self._map[index])
+        return self._cap is not None and self._next <= source <= self._next + MAX_GRAB_AHEAD
 
     def _decode(self, index: int) -> np.ndarray:
         source = index if self._map is None else int(self._map[index])

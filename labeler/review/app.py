@@ -23,6 +23,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ from .panels import (
 from .playback import Playback
 from .scene import TRAIL_FRAMES, PlayerNodes, add_ball, apply_pose, camera_presets, update_ball
 
-from ..frames import stamp_frame_number
+from ..frames import SERVE_WINDOW, serve_next, stamp_frame_number
 from ..player import BrowserPlayer, PlayerReport
 from ..viewer_common import encode_jpeg
 from .shots import shots_csv_text
@@ -93,6 +94,14 @@ class FrameImages:
                 self._cache.pop(self._order.pop(0), None)
             return img
 
+    def next_to_serve(self, frames: Sequence[int], _scale: float = 1.0, *, first: bool = False) -> int:
+        """Which of ``frames`` (most wanted first) to draw and send next (:func:`labeler.frames.serve_next`)."""
+        cands = list(frames[:SERVE_WINDOW])
+        with self._lock:
+            ready = {f for f in cands if f in self._cache}
+            free = {f for f in cands if self._src is None or self._src.seek_free(f)}
+        return serve_next(cands, ready, free, first=first)
+
     def close(self) -> None:
         if self._src is not None:
             self._src.close()
@@ -122,7 +131,7 @@ class Session:
         self._attached_now = False
         ball = [d.ball_at(f) for f in range(d.first_frame, d.last_frame + 1)]
         self.player = BrowserPlayer(
-            client, self._jpeg, self._on_report, kind="review", lo=d.first_frame, hi=d.last_frame, fps=float(d.fps),
+            client, self._jpeg, self._on_report, pick=app.frames.next_to_serve, kind="review", lo=d.first_frame, hi=d.last_frame, fps=float(d.fps),
             first=d.first_frame, ahead=PAGE_AHEAD, behind=4, budget_px=PAGE_BUDGET_PX, max_blobs=10_000,
             width=int(first.shape[1]), height=int(first.shape[0]), speed=1.0, loop=True, ball="/live/ball",
             offset=d.first_frame, ball_xyz=[[round(float(v), 4) for v in p] if np.isfinite(p).all() else None
