@@ -208,13 +208,18 @@ def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s
                     out["missed"] += 1
                     return None
                 key_t = page.evaluate(f"window.__r3dKeys[{n_keys}]")
-                log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t_mark})")
+                # from a second before the mark: the picture on screen when the key went down is known even
+                # when no animation frame ran between the mark and the key
+                log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t_mark} - 1000)")
                 first = next(r for r in log if r[0] >= key_t and r[1] == expect)
                 before = [r for r in log if r[0] < key_t]
-                ref = np.asarray(before[-1][2] if before else log[0][2])
-                old = before[-1][1] if before else None
+                if not before:
+                    print(f"  no picture read before the key {key} (to {expect}): not judged", file=sys.stderr)
+                    before = [(key_t, None, [])]
+                ref, old = np.asarray(before[-1][2]), before[-1][1]
                 for r in log:  # before the new frame: another picture than the old one (an intermediate render)
-                    if key_t <= r[0] < first[0] and (r[1] != old or np.abs(np.asarray(r[2]) - ref).max() > 40):
+                    if old is not None and key_t <= r[0] < first[0] and \
+                            (r[1] != old or np.abs(np.asarray(r[2]) - ref).max() > 40):
                         out["intermediate"] += 1
                         print(f"  intermediate picture: key {key} from {old} to {expect}: code {r[1]} read "
                               f"{r[0] - key_t:.0f} ms after the key", file=sys.stderr)

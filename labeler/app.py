@@ -22,7 +22,7 @@ import numpy as np
 from inference.clipio import Clip, FormatError
 
 from .client_js import SHORTCUTS_BUTTON, install_keyboard, show_tab
-from .frames import FrameCache
+from .frames import BACKWARD_RUN, FrameCache
 from .frameplane import NODE, FramePlane
 from .panels.assist import populate_assist
 from .panels.ball import populate_ball
@@ -257,9 +257,14 @@ class ClientView:
                 self.step(1)
 
     def _page_jpeg(self, frame: int, scale: float) -> bytes:
-        """A frame for the page, at ``scale``; decoded in runs when the page goes backwards."""
+        """A frame for the page, at ``scale``. When the page goes backwards, a frame that needs a seek comes
+        with a run below it: :data:`~labeler.frames.BACKWARD_RUN` frames below the page's cursor in all (the
+        page asks for the frames from a little below its cursor first)."""
         rep = self.player.last
-        return self.frames.get(frame, scale, backward=rep is not None and rep.direction < 0)
+        run = 0
+        if rep is not None and rep.direction < 0:
+            run = max(BACKWARD_RUN // 4, BACKWARD_RUN - max(0, rep.goal - frame))
+        return self.frames.get(frame, scale, backward=run)
 
     def _on_report(self, rep: PlayerReport, first: bool) -> None:
         """The page showed ``rep.shown`` (viser's event loop: only records it and wakes the render thread).

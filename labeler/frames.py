@@ -155,11 +155,11 @@ class FrameCache:
         with self._lock:
             return (int(index), eighths(scale)) in self._jpeg
 
-    def get(self, index: int, scale: float = 1.0, *, backward: bool = False) -> bytes:
+    def get(self, index: int, scale: float = 1.0, *, backward: int = 0) -> bytes:
         """JPEG bytes of frame ``index`` (cached, or decoded and encoded now), at ``scale`` of its size
-        (rounded up to eighths: the page asks for the pixels its view needs). ``backward``: the frames are
-        being asked for in descending order (playing or stepping backwards): when this one needs a seek,
-        the :data:`BACKWARD_RUN` frames below it are decoded in the same pass and kept."""
+        (rounded up to eighths: the page asks for the pixels its view needs). ``backward`` > 0: the frames
+        are being asked for in descending order (playing or stepping backwards): when this one needs a seek,
+        the ``backward`` frames below it are decoded in the same pass and kept (see :data:`BACKWARD_RUN`)."""
         index = int(index)
         if not 0 <= index < self.n_frames:
             raise IndexError(f"frame {index} is outside the clip (0..{self.n_frames - 1})")
@@ -169,7 +169,7 @@ class FrameCache:
             if data is not None:
                 self._jpeg.move_to_end(key)
                 return data
-        return self._load(key, BACKWARD_RUN if backward else 0)
+        return self._load(key, max(0, int(backward)))
 
     def next_to_serve(self, frames: Sequence[int], scale: float = 1.0, *, first: bool = False) -> int:
         """Which of ``frames`` (most wanted first) to encode and send next: :func:`serve_next` with this
