@@ -237,25 +237,27 @@ def browser_run(clip_dir: Path, steps: int, chromium: str, variant: str, dwell_s
                 if dt is not None:
                     out["ten"].append(dt)
             def hold(key: str) -> dict:
-                """Hold ``key`` for HOLD_S: the rate of distinct frames shown once playing (the first change
-                is the key's own step; playing starts 0.35 s later), the frames it moved, its largest lag."""
+                """Hold ``key`` for HOLD_S: distinct frames shown per second from the first played frame to the
+                key's release (the first change is the key's own step; playing starts 0.35 s later), the
+                frames it moved, and its largest lag behind the clip's clock at any animation frame."""
                 time.sleep(1.0)
                 t0 = page.evaluate("performance.now()")
                 page.keyboard.down(key)
                 time.sleep(HOLD_S)
+                t_up = page.evaluate("performance.now()")
                 page.keyboard.up(key)
                 time.sleep(0.5)
-                log = page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t0})")
-                changes = [(t, n) for (t, n, _), (_, m, _) in zip(log[1:], log[:-1]) if n != m][1:]
+                log = [(t, n) for t, n, _ in page.evaluate(f"window.__r3dRead.log.filter((r) => r[0] >= {t0})")]
+                changes = [(t, n) for (t, n), (_, m) in zip(log[1:], log[:-1]) if n != m][1:]
+                changes = [(t, n) for t, n in changes if t <= t_up]
                 if len(changes) < 2:
                     return {}
-                span = (changes[-1][0] - changes[0][0]) / 1000
-                sign = 1 if changes[-1][1] >= changes[0][1] else -1
-                return {"fps": (len(changes) - 1) / max(span, 1e-3),
-                        "frames": abs(changes[-1][1] - changes[0][1]),
+                (ta, na), sign = changes[0], (1 if changes[-1][1] >= changes[0][1] else -1)
+                playing = [(t, n) for t, n in log if ta <= t <= t_up]
+                return {"fps": (len(changes) - 1) / max((t_up - ta) / 1000, 1e-3),
+                        "frames": abs(changes[-1][1] - na),
                         # lag: how far the frame shown is behind a clock started at the first played frame
-                        "lag": max(0.0, max((t - changes[0][0]) / 1000 * fps - sign * (n - changes[0][1])
-                                            for t, n in changes) / fps)}
+                        "lag": max(0.0, max((t - ta) / 1000 * fps - sign * (n - na) for t, n in playing) / fps)}
 
             out["hold"] = hold("l")
             last = view.session.n_frames - 1
@@ -305,8 +307,9 @@ def main() -> int:
                     row(size, f"Shift+L → frame +10 on screen ({tag})", stats(r["ten"]))
                     for key, what in (("hold", "hold L"), ("back", "hold J from the end")):
                         h = r.get(key) or {}
-                        figs = f"{h['fps']:8.1f} {h['lag'] * 1000:8.0f}" if h else f"{'–':>8} {'–':>8}"
-                        row(size, f"{what}: frames/s shown | max lag ms ({tag})", figs)
+                        figs = (f"{h['fps']:8.1f} {h['frames']:8d} {h['lag'] * 1000:8.0f}" if h
+                                else f"{'–':>8} {'–':>8} {'–':>8}")
+                        row(size, f"{what}: frames/s | frames moved | max lag ms ({tag})", figs)
                     row(size, f"intermediate renders | steps missed ({tag})",
                         f"{r['intermediate']:8d} {r['missed']:8d}")
     finally:

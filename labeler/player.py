@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -59,6 +60,23 @@ class PlayerReport:
         return rep
 
 
+def in_time(frames: list[int], goal: float, direction: int, ahead_s: float, rate: float,
+            loop: tuple[int, int] | None = None) -> list[int]:
+    """The ``frames`` that a page playing at ``rate`` frames/s in ``direction`` from frame ``goal`` (its clock
+    at its last report) has not passed ``ahead_s`` seconds from now (the time since that report plus the time
+    to serve one frame): the others would arrive too late to be shown, and serving them would keep the
+    server behind the clock for good. ``loop``: ``(lo, hi)`` of a page that wraps around at the end."""
+    due = goal + direction * ahead_s * rate
+    out = []
+    for f in frames:
+        ahead = (f - due) * direction
+        if loop is not None and ahead < -(loop[1] - loop[0] + 1) / 2:
+            ahead += loop[1] - loop[0] + 1  # past the wrap: ahead of the clock
+        if ahead >= 0:
+            out.append(f)
+    return out
+
+
 class BrowserPlayer:
     """The frame feed of one tab.
 
@@ -85,6 +103,9 @@ class BrowserPlayer:
         self.cmd = 0  # the number of the last play / pause command sent
         self._want: list[int] = []
         self._lock = threading.Lock()
+        self.speed = float(config.get("speed", 1.0))
+        self._report_at = 0.0  # time.monotonic() of the last report
+        self._serve_s = 0.0    # running mean of the time to encode and send one frame
         self.channel = client.gui.add_text("frame player", "", visible=False, order=1000)
         self.channel.on_update(self._on_channel)
 
@@ -99,11 +120,14 @@ class BrowserPlayer:
         if rep is None or rep.token != self.token or (self.last is not None and rep.seq <= self.last.seq):
             return
         first = self.last is None
+        stopped = self.last is not None and self.last.playing and not rep.playing
         self.attached = True
-        self.last = rep
+        self.last, self._report_at = rep, time.monotonic()
         with self._lock:  # the new wants first, then those of earlier reports not sent yet (asked for once;
-            # while playing, only those still ahead of the frame shown: the page has dropped the others)
-            older = [f for f in self._want if not rep.playing or (f - rep.shown) * rep.direction > 0]
+            # while playing, only those still ahead of the frame shown: the page has dropped the others; none
+            # once it stops: it asks again for those it still wants)
+            older = [] if stopped else \
+                [f for f in self._want if not rep.playing or (f - rep.shown) * rep.direction > 0]
             self._want = list(dict.fromkeys([*rep.want, *older]))[:4 * MAX_WANT]
         self.on_report(rep, first)
 
@@ -131,6 +155,18 @@ class BrowserPlayer:
                 return None
             wanted = list(self._want)
         scale, rep = self.scale, self.last
+        if rep is not None and rep.playing:  # frames the page's clock will have passed are dropped, not sent
+            rate = min(float(self.config.get("fps", 30.0)) * self.speed, 60.0)
+            loop = (self.lo, self.hi) if self.config.get("loop") else None
+            timely = in_time(wanted, rep.goal, rep.direction,
+                             time.monotonic() - self._report_at + self._serve_s, rate, loop)
+            if len(timely) < len(wanted):
+                with self._lock:
+                    self._want = [f for f in self._want if f in timely or f not in wanted]
+                if not timely:
+                    return None
+                wanted = timely
+        t0 = time.monotonic()
         frame = wanted[0]
         if self.pick is not None:
             frame = self.pick(wanted, scale, first=rep is None or frame == rep.goal)
@@ -140,6 +176,8 @@ class BrowserPlayer:
         queue_js(self.client, put_frame_js(self.token, frame, self.jpeg(frame, scale), scale))
         self.client.flush()
         self.sent += 1
+        # a run decoded backwards serves many frames at once: the mean follows, it is not a single frame's time
+        self._serve_s = 0.8 * self._serve_s + 0.2 * (time.monotonic() - t0)
         return frame
 
     def _call(self, method: str, *args) -> None:
@@ -159,6 +197,7 @@ class BrowserPlayer:
         return rep.cmd >= self.cmd
 
     def set_speed(self, speed: float) -> None:
+        self.speed = float(speed)
         self._call("setSpeed", float(speed))
 
     def remove(self) -> None:

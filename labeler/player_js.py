@@ -256,9 +256,15 @@ PLAYER_JS = r"""
     // playing: decode the frames in the order they fall due, from those the clock will reach once decoded
     let soonest = order;
     if (P.playing) {
-      const ahead = Array.from(keep).filter((f) => (f - P.goal) * P.dir >= 0).sort((a, b) => (a - b) * P.dir);
+      const has = (f) => { const e = P.entries.get(f); return !!(e && e.blob); };
+      const ahead = Array.from(keep).filter((f) => (f - P.goal) * P.dir >= 0 && has(f)).sort((a, b) => (a - b) * P.dir);
       const due = ahead.filter((f) => (f - P.goal) * P.dir >= 0.7 * lead());
       soonest = due.length ? due : ahead;
+      if (!soonest.length) {  // nothing ahead of the clock has come: the newest frame past the one shown, late
+        const late = Array.from(keep).filter((f) => (f - P.shown) * P.dir > 0 && (P.goal - f) * P.dir >= 0 && has(f));
+        late.sort((a, b) => (b - a) * P.dir);
+        soonest = late.slice(0, 1);  // (but newer than the one shown: dropping frames, not lagging further)
+      }
     }
     for (const f of soonest) {
       if (P.decoding >= 4) break;
@@ -350,6 +356,7 @@ PLAYER_JS = r"""
   P.stop = () => {
     if (!P.playing) return;
     P.playing = null; P.goal = P.shown;
+    P.requested.clear();  // the server drops the frames a playing clock passes: ask again for those still wanted
     P.report(true);
   };
   // the server's play / pause, numbered: reports say which command they follow (the server ignores the
@@ -394,9 +401,13 @@ PLAYER_JS = r"""
     P._sent = t;
     const want = [];
     let inflight = 0;
-    for (const [f, at] of P.requested) { if (t - at > 3000) P.requested.delete(f); else inflight += 1; }
-    for (const f of P.window()) {
-      if (inflight + want.length >= (P.playing ? 2 * P.cfg.ahead : 8)) break;
+    for (const [f, at] of P.requested) {  // asked for long ago, or passed by the clock (the server drops those)
+      if (t - at > 3000 || (P.playing && (f - P.goal) * P.dir < 0)) P.requested.delete(f); else inflight += 1;
+    }
+    const win = P.window();
+    for (const f of win) {
+      // at most a few frames on their way; the frame to show when not playing is always asked for
+      if (inflight + want.length >= (P.playing ? 2 * P.cfg.ahead : 8) && (P.playing || f !== win[0])) break;
       const e = P.entries.get(f);
       if ((e && e.blob && !P.blurry(e)) || P.requested.has(f)) continue;
       want.push(f); P.requested.set(f, t);

@@ -138,12 +138,25 @@ def test_page_player_steps_plays_while_held_and_keeps_the_colours(app_and_clip, 
     wait_until(lambda: read()[0] == 0 and view.shown == 0, what="back on frame 0")
     assert np.abs(read()[1] - viser_picture).max() < 12  # the page's texture: same picture, same colours
 
+    def ball_layer_shown() -> bool:
+        handle = view.overlay._handles.get("/overlay/ball")
+        return handle is not None and handle.visible
+
+    with view.lock:                             # a labelled ball on every frame the hold may reach
+        for f in range(view.session.n_frames):
+            view.session.set_ball(f, (0.5, 0.5))
+    view.request(overlay=True)
+    wait_until(ball_layer_shown, what="frame 0's ball overlay")
     page.keyboard.down("l")                     # held: plays at the clip's rate
     wait_until(lambda: read()[0] >= 12, what="frames advancing while L is held")
+    # while playing, the overlays of one frame are hidden (drawn twice a second they would sit on other
+    # frames, and every draw re-renders the 3D scene)
+    wait_until(lambda: view.playing and not ball_layer_shown(), what="the ball overlay hidden while playing")
     page.keyboard.up("l")
     wait_until(lambda: not view.playing and view.shown == read()[0], what="playing to stop on release")
     stopped = read()[0]
     assert stopped >= 12
+    wait_until(ball_layer_shown, what=f"the ball overlay of frame {stopped} (where it stopped) after the stop")
     press(page, "Shift+J")                      # a step from where it stopped
     wait_until(lambda: read()[0] == stopped - 10 and view.shown == stopped - 10, what="Shift+J after the hold")
     stopped -= 10

@@ -12,7 +12,7 @@ from label_helpers import copy_sample
 from inference.camera import Camera
 from inference.clipio import Clip, HitEvents
 from labeler.assist import ProgressClip, propose_events
-from labeler.frames import FrameCache
+from labeler.frames import FrameCache, serve_next
 from labeler.render import clip_segments, court_segments, ring
 from labeler.state import LabelSession
 from labeler.viewer_common import ImagePlane, fit_distance, screen_of_pixel
@@ -169,3 +169,35 @@ def test_court_point_labels_are_short_and_never_overlap():
     assert moved and len(leader_segments(pts, corners, char, line, texts)) == len(moved)
     lone = layout_labels({"far_left": np.array([50.0, 50.0])}, texts, char, line, gap)
     assert not lone["far_left"][1] and np.allclose(lone["far_left"][0], [58.0, 58.0])   # right-below, no leader
+
+
+def test_serve_next_reads_the_video_in_decode_order():
+    free = {10, 11, 14, 15}
+    assert serve_next([14, 15, 10, 11], set(), free) == 10  # wanted frames on the decoder's way to 14: first
+    assert serve_next([14, 15, 10, 11], {15}, free) == 15  # one already encoded: at once
+    assert serve_next([14, 15, 10, 11], set(), free, first=True) == 14  # the frame an annotator waits for
+    # the most wanted one needs a seek: one seek to the lowest wanted one up to 32 frames below it, then up
+    assert serve_next([50, 49, 48, 40, 5], set(), set()) == 40
+
+
+def test_frame_cache_plays_backwards_in_runs_of_one_seek(tmp_path):
+    clip = Clip(copy_sample(tmp_path / "c"))
+    cache = FrameCache(clip, capacity=64, prefetch=False)
+    src, seeks = cache._source, []
+    seek = src._seek
+    src._seek = lambda cap, index: (seeks.append(index), seek(cap, index))[1]
+    try:
+        cache.get(100)
+        assert src.seek_free(101) and src.seek_free(101 + 32) and not src.seek_free(99)
+        assert cache.next_to_serve([102, 99, 101]) == 101  # on the way to 102; 99 would need a seek
+        before = len(seeks)
+        for f in range(80, 60, -1):  # playing backwards: the frames below each seek come with it
+            cache.get(f, backward=16)
+        assert len(seeks) - before == 2  # 80 (with 64..79), then 63 (with 47..62): not one seek per frame
+        assert all(cache.cached(i) for i in range(47, 81))
+        with clip.frames() as frames:
+            ref = frames.read(70)
+        img = cv2.imdecode(np.frombuffer(cache.get(70), np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+        assert np.abs(img.astype(int) - ref)[60:].mean() < 4  # the right frame (under its burned-in number)
+    finally:
+        cache.close()
