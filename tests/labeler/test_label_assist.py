@@ -16,7 +16,7 @@ from inference.clipio import Clip, FormatError
 from inference.clipio.tables import BallTrack, HitEvents
 from labeler.app import error_markdown, shortcuts_markdown
 from labeler.frames import code_cell_centres, read_frame_code, stamp_frame_number
-from labeler.player import PlayerReport
+from labeler.player import PlayerReport, in_time
 from labeler.render import COLORS, confidence_color
 from labeler.state import LabelSession
 from labeler.viewer_common import md_escape
@@ -71,6 +71,14 @@ def test_frame_code_reads_back_after_jpeg(size):
         img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
         c = np.round(code_cell_centres(w)).astype(int)
         assert read_frame_code(img[c[:, 1], c[:, 0]].mean(axis=1)) == index
+
+
+def test_frames_a_playing_page_would_get_too_late_are_not_sent():
+    # 30 frames/s from frame 100, 0.1 s since the report + serving: the clock is at 103 when they arrive
+    assert in_time([101, 102, 103, 104, 110], 100, 1, 0.1, 30.0) == [103, 104, 110]
+    assert in_time([99, 97, 96, 90], 100, -1, 0.1, 30.0) == [97, 96, 90]  # backwards
+    # a page that loops (the review) wants the first frames again after the last
+    assert in_time([238, 0, 1, 120], 235, 1, 0.05, 30.0, loop=(0, 239)) == [238, 0, 1]
 
 
 def test_player_report_parsing_rejects_what_the_page_would_never_send():
