@@ -115,8 +115,8 @@ class ClientView:
 
         self.frame_node = FramePlane(client.scene, self.plane, self._on_click)
         self.player = BrowserPlayer(client, self._page_jpeg, self._on_report, pick=self.frames.next_to_serve,
-                                    kind="plane", node=NODE, lo=0, hi=s.n_frames - 1, fps=float(s.fps), first=0, ahead=PAGE_AHEAD,
-                                    behind=PAGE_BEHIND, budget_px=PAGE_BUDGET_PX,
+                                    kind="plane", node=NODE, lo=0, hi=s.n_frames - 1, fps=float(s.fps), first=0,
+                                    ahead=PAGE_AHEAD, behind=PAGE_BEHIND, budget_px=PAGE_BUDGET_PX,
                                     max_blobs=max(32, int(PAGE_MAX_BLOBS * 1920 * 1080 / (s.width * s.height))),
                                     width=s.width, height=s.height, render_height=self.plane.render_height,
                                     speed=1.0, loop=False)

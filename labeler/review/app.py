@@ -131,7 +131,8 @@ class Session:
         self._attached_now = False
         ball = [d.ball_at(f) for f in range(d.first_frame, d.last_frame + 1)]
         self.player = BrowserPlayer(
-            client, self._jpeg, self._on_report, pick=app.frames.next_to_serve, kind="review", lo=d.first_frame, hi=d.last_frame, fps=float(d.fps),
+            client, self._jpeg, self._on_report, pick=app.frames.next_to_serve, kind="review", lo=d.first_frame,
+            hi=d.last_frame, fps=float(d.fps),
             first=d.first_frame, ahead=PAGE_AHEAD, behind=4, budget_px=PAGE_BUDGET_PX, max_blobs=10_000,
             width=int(first.shape[1]), height=int(first.shape[0]), speed=1.0, loop=True, ball="/live/ball",
             offset=d.first_frame, ball_xyz=[[round(float(v), 4) for v in p] if np.isfinite(p).all() else None
