@@ -124,10 +124,9 @@ class BrowserPlayer:
         self.attached = True
         self.last, self._report_at = rep, time.monotonic()
         with self._lock:  # the new wants first, then those of earlier reports not sent yet (asked for once;
-            # while playing, only those still ahead of the frame shown: the page has dropped the others; none
-            # once it stops: it asks again for those it still wants)
-            older = [] if stopped else \
-                [f for f in self._want if not rep.playing or (f - rep.shown) * rep.direction > 0]
+            # none once it stops: it asks again for those it still wants; while playing, those the clock has
+            # passed are dropped by send_next)
+            older = [] if stopped else self._want
             self._want = list(dict.fromkeys([*rep.want, *older]))[:4 * MAX_WANT]
         self.on_report(rep, first)
 
@@ -161,8 +160,9 @@ class BrowserPlayer:
             timely = in_time(wanted, rep.goal, rep.direction,
                              time.monotonic() - self._report_at + self._serve_s, rate, loop)
             if len(timely) < len(wanted):
+                late = set(wanted) - set(timely)
                 with self._lock:
-                    self._want = [f for f in self._want if f in timely or f not in wanted]
+                    self._want = [f for f in self._want if f not in late]
                 if not timely:
                     return None
                 wanted = timely
