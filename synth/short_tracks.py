@@ -74,6 +74,8 @@ VIEWS: dict[str, dict[str, tuple]] = {
         "side": ((-14.0, 11.9, 5.0), (5.5, 11.9, 0.0), 75.0),
         "oblique": ((-8.0, -6.0, 7.0), (5.5, 12.0, 0.0), 60.0),
         "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
+        # a broadcast's long lens 22 m behind the near baseline, 9 m up: it looks along the flights
+        "behind 22 m": ((5.5, -22.0, 9.0), (5.5, 12.0, 0.0), 30.0),
     },
     # the table (1.525 x 2.74 m, top 0.76 m) seen from 3-4 m, as the motion-capture rooms film it
     "table_tennis": {

@@ -126,3 +126,31 @@ def format_table(rows: dict[str, dict], title: str = "") -> str:
         lines.append(f"| {m} | {r['MRE_px']:.2f} | {r['MedRE_px']:.2f} | {r['MAE_m']:.3f} | {r['MedAE_m']:.3f} | "
                      f"{r['fps']:.0f} | {r['coverage'] * 100:.0f}% |")
     return "\n".join(lines)
+
+
+#: P(|x| ≤ k) of a 1D standard normal for k = 1, 2: the share of errors within the 1-σ / 2-σ marginal band
+GAUSS_1D = (0.6827, 0.9545)
+
+
+def ray_basis(ray: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) orthonormal rows per frame: the line of sight ``ray`` (F, 3), the horizontal direction across
+    it, and the third (across, in the vertical plane of the ray)."""
+    a = ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    h = np.cross(a, np.array([0.0, 0.0, 1.0]))
+    n = np.linalg.norm(h, axis=1, keepdims=True)
+    h = np.where(n > 1e-9, h / np.maximum(n, 1e-12), np.array([1.0, 0.0, 0.0]))   # a vertical ray: any horizontal
+    return np.stack([a, h, np.cross(a, h)], axis=1)
+
+
+def direction_coverage(d: np.ndarray, cov: np.ndarray, ray: np.ndarray) -> dict[str, tuple[float, float]]:
+    """Share of the errors ``d`` (F, 3) within 1 σ and 2 σ of their reported covariance ``cov`` (F, 3, 3),
+    per direction: ``along`` the line of sight ``ray`` (F, 3) and ``across`` it (the two directions across
+    pooled), each against its marginal σ (√(uᵀ C u)); a calibrated covariance gives :data:`GAUSS_1D` in both.
+    Empty input: NaN."""
+    if not len(d):
+        return {"along": (float("nan"),) * 2, "across": (float("nan"),) * 2}
+    E = ray_basis(ray)
+    z = np.einsum("fki,fi->fk", E, d) / np.sqrt(np.einsum("fki,fij,fkj->fk", E, cov, E))   # (F, 3) marginal z
+    along, across = np.abs(z[:, 0]), np.abs(z[:, 1:]).ravel()
+    return {"along": (float(np.mean(along <= 1)), float(np.mean(along <= 2))),
+            "across": (float(np.mean(across <= 1)), float(np.mean(across <= 2)))}

@@ -85,16 +85,21 @@ class HitPrior:
 class Uncertainty:
     """How the joint method's per-frame covariance is calibrated (court YAML ``uncertainty``).
 
-    covariance = ``scale``² × the Gauss-Newton covariance + (``model_m_per_s`` × t)² along the line of sight
-    + ``floor_m``² I, with t the time (s) from the frame to the nearest contact; on a free end (the lead-in
+    covariance = ``scale``² × S (the Gauss-Newton covariance) S + (``model_m_per_s`` × t)² along the line of
+    sight + ``floor_m``² I, with S = I + (``along_scale`` − 1) r rᵀ (r the unit line of sight: the Gauss-Newton
+    part's width along the ray scaled apart from across it) and t the time (s) from the frame to the nearest
+    contact; on a free end (the lead-in
     before the first contact, the run-out after the last: one end pinned, not two) the along-ray term grows
     by ``free_end_m_per_s`` instead (None: ``model_m_per_s``). A flight whose reprojection residuals say the
     model is off (mean squared normalised residual χ² > 1) has its covariance (both parts) multiplied by
     χ²^``residual_power``. The Gauss-Newton part holds
     the 2D noise, the contact times and the priors as the fit states them; ``scale`` corrects their stated
     widths, the along-ray term stands for what the flight model leaves out (drag, spin, the bounce), which the
-    2D track cannot see across the line of sight. Fitted per sport on synthetic clips of seeds that the
-    accuracy benchmark never uses (``bench/bench_joint.py --calibrate``).
+    2D track cannot see across the line of sight; ``along_scale`` corrects the Gauss-Newton width along the
+    ray apart from across it (on simulated rallies it states the depth about 1.25× wider, relative to across,
+    than the errors are). Fitted per sport on synthetic clips of seeds that
+    the accuracy benchmark never uses, by the coverage of the 1-σ / 2-σ ellipsoids and along / across the ray
+    (``bench/bench_joint.py --calibrate``).
     """
 
     scale: float = 1.0
@@ -102,6 +107,11 @@ class Uncertainty:
     floor_m: float = 0.003
     free_end_m_per_s: float | None = None
     residual_power: float = 0.0
+    along_scale: float = 1.0
+
+    def shape(self, ray: np.ndarray) -> np.ndarray:
+        """(M, 3, 3) S = I + (``along_scale`` − 1) r rᵀ per unit line of sight ``ray`` (M, 3)."""
+        return np.eye(3)[None] + (self.along_scale - 1.0) * np.einsum("mi,mj->mij", ray, ray)
 
     def flight_factor(self, chi2: np.ndarray) -> np.ndarray:
         """Covariance factor per flight from its mean squared normalised residual (NaN: no 2D points → 1)."""
@@ -119,8 +129,9 @@ class Uncertainty:
         if unknown:
             raise ValueError(f"{court.source}: unknown uncertainty keys {unknown}")
         out = cls(**{k: float(v) for k, v in extra.items()})
-        if min(out.scale, out.model_m_per_s, out.floor_m, out.free_end_m_per_s or 0.0, out.residual_power) < 0:
-            raise ValueError(f"{court.source}: uncertainty values must be ≥ 0, got {extra}")
+        if min(out.scale, out.model_m_per_s, out.floor_m, out.free_end_m_per_s or 0.0, out.residual_power) < 0 \
+                or out.along_scale <= 0:
+            raise ValueError(f"{court.source}: uncertainty values must be ≥ 0 (along_scale > 0), got {extra}")
         return out
 
 
@@ -1249,7 +1260,8 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
                       calibration: Uncertainty | None = None) -> FrameErrorModel | None:
     """Every frame of the chain, from the first to the last frame: the :class:`FrameErrorModel` from the
     Gauss-Newton covariance of θ (scaled by the reprojection residuals' variance when it exceeds 1, times
-    ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale and along-ray model error),
+    ``inflation``²), calibrated by ``calibration`` (:class:`Uncertainty`; its scale, its width along the ray
+    apart from across it, and its along-ray model error),
     plus ``floor_m``² I. None when θ's normal matrix cannot be inverted."""
     cal = calibration or Uncertainty(floor_m=0.0)
     fl, taus = sol.aux["flights"], sol.aux["taus"]
@@ -1268,6 +1280,8 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
     Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
     ray = xyz - problem.obs.camera.centre
     ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
+    if cal.along_scale != 1.0:
+        Jp = np.einsum("mij,mjc->mic", cal.shape(ray), Jp)                      # the width along the ray apart
     t = np.min(np.abs(frames[:, None] - taus[None, :]), axis=1) / problem.fps          # (M,) s
     free = np.array([f.end is None for f in problem.chain.flights], bool)[own]
     along = (cal.along_ray_rate(free) * t)[:, None] * ray
