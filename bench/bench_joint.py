@@ -5,6 +5,7 @@ covariance per clip, the court plausibility figures, and frames per CPU-second. 
     .venv/bin/python bench/bench_joint.py [--clips 6] [--data runs/bench_3d] [--shift 0,2]
     .venv/bin/python bench/bench_joint.py --calibrate [--clips 16] [--draws 2] [--data runs/calib_3d]
     .venv/bin/python bench/bench_joint.py --draws 8      # each clip's σ coverage over 8 noise draws
+    .venv/bin/python bench/bench_joint.py --draws 4 --camera clicked   # ... with a camera from noisy clicks
 
 The clips are those of bench/bench_reconstruct.py (seeds 100+ padel, 200+ tennis; generated once). Inputs:
 ground-truth 2D ball + Gaussian noise σ = 2 px, ground-truth events (optionally each moved by a random
@@ -255,17 +256,17 @@ def direction_table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-def draws_table(clips, sport: str, shift: int, n: int) -> str:
+def draws_table(clips, sport: str, shift: int, n: int, camera: str = "gt") -> str:
     """σ coverage of each clip over ``n`` draws of the 2D noise (and of the event jitter): per draw (its range)
     and pooled over the draws, Markdown. One draw's coverage rests on a few flights (their frames share one
     depth error); pooled over draws it says whether the covariance fits *this clip's* geometry."""
-    out = [f"\n## {sport}: σ coverage per clip over {n} noise draws (events ±{shift})\n",
+    out = [f"\n## {sport}: σ coverage per clip over {n} noise draws (events ±{shift}, camera {camera})\n",
            "| clip | frames | 1σ per draw (min–max) | 2σ per draw (min–max) | 1σ over the draws | 2σ over the draws | "
            "distance, points |", "|" + "---|" * 7]
     dist, pooled = [], []
     for clip in clips:
-        figs = [clip_figures(clip, Setting(noise_px=2.0, players="gt", event_shift=shift, seed=1 + j), oracle=0)
-                for j in range(n)]
+        figs = [clip_figures(clip, Setting(noise_px=2.0, players="gt", event_shift=shift, seed=1 + j, camera=camera),
+                             oracle=0) for j in range(n)]
         m2s = [f["m2"] for f in figs]
         pooled.append({"name": clip.root.name, **{k: np.concatenate([f[k] for f in figs]) for k in ("d", "cov", "ray")}})
         c = np.array([(np.mean(m <= 1), np.mean(m <= 4)) for m in m2s if len(m)])
@@ -289,6 +290,9 @@ def main() -> None:
     ap.add_argument("--sports", default="padel,tennis")
     ap.add_argument("--draws", type=int, default=0,
                     help="instead of the accuracy tables: each clip's σ coverage over this many noise draws")
+    ap.add_argument("--camera", choices=("gt", "clicked"), default="gt",
+                    help="the true camera (default) or one calibrated from the clip's court clicks, ±1 px, whose "
+                         "pose uncertainty the covariance then includes")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit the court YAMLs' `uncertainty` on seeds 300/400")
     args = ap.parse_args()
@@ -299,9 +303,9 @@ def main() -> None:
         clips = dataset(args.data, sport, args.clips)
         for k in (int(x) for x in args.shift.split(",")):
             if args.draws:
-                print(draws_table(clips, sport, k, args.draws), flush=True)
+                print(draws_table(clips, sport, k, args.draws, args.camera), flush=True)
                 continue
-            setting = Setting(noise_px=2.0, players="gt", event_shift=k, seed=1)
+            setting = Setting(noise_px=2.0, players="gt", event_shift=k, seed=1, camera=args.camera)
             rows = [clip_figures(c, setting) for c in clips]
             print(table(rows, f"\n## {sport}: {len(clips)} held-out clips, {setting.label()}\n"), flush=True)
 

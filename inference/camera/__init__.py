@@ -170,6 +170,39 @@ class Camera:
         """Like :meth:`rays` for normalised image coordinates."""
         return self.rays(np.atleast_2d(uv) * np.asarray(self.image_size, dtype=float))
 
+    # --- pose uncertainty -----------------------------------------------------------------------
+    def perturbed(self, dq: np.ndarray) -> Camera:
+        """The camera moved by ``dq`` (7,) in the parameters of :data:`POSE_PARAMETERS`: its centre by
+        ``dq[:3]`` m, its orientation by the rotation vector ``dq[3:6]`` rad (about the court axes: R' = R
+        exp([dq[3:6]]×)), its focal length by ``dq[6]`` px (both axes, in proportion); distortion kept."""
+        dq = np.asarray(dq, dtype=float).reshape(7)
+        R = self.R @ _rodrigues(dq[3:6])
+        K = self.K.copy()
+        K[:2, :2] *= (K[0, 0] + dq[6]) / K[0, 0]
+        return Camera.from_krt(K, R, -R @ (self.centre + dq[:3]), self.image_size, dist=self.dist)
+
+    def pose_difference(self, other: Camera) -> np.ndarray:
+        """(7,) the ``dq`` with ``self.perturbed(dq)`` ≈ ``other`` (small differences)."""
+        W = self.R.T @ other.R                                      # exp([w]×)
+        w = 0.5 * np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])   # small-angle log
+        return np.concatenate([other.centre - self.centre, w, [other.K[0, 0] - self.K[0, 0]]])
+
+    def pose_covariance(self) -> np.ndarray | None:
+        """(7, 7) covariance of the calibration over :data:`POSE_PARAMETERS` (camera.yaml ``pose_cov``; made
+        symmetric, negative eigenvalues from rounding set to 0), or None when the camera has none (ground
+        truth, an automatic fit, an older file) or it is not a finite 7×7 matrix."""
+        c = self.meta.get("pose_cov")
+        if c is None:
+            return None
+        try:
+            c = np.asarray(c, dtype=float)
+        except (TypeError, ValueError):
+            return None
+        if c.shape != (7, 7) or not np.all(np.isfinite(c)):
+            return None
+        w, V = np.linalg.eigh(0.5 * (c + c.T))
+        return (V * np.maximum(w, 0.0)) @ V.T
+
     # --- camera.yaml ----------------------------------------------------------------------------
     def to_dict(self) -> dict:
         d = {
@@ -222,6 +255,20 @@ class Camera:
             )
         except (TypeError, ValueError) as e:
             raise FormatError(path, f"invalid camera: {e}", fix="re-run `rally3d calibrate <clip>`") from None
+
+
+#: the parameters of a camera's pose uncertainty (:meth:`Camera.perturbed`, camera.yaml ``pose_cov``)
+POSE_PARAMETERS = ("centre_x_m", "centre_y_m", "centre_z_m", "rotation_x_rad", "rotation_y_rad", "rotation_z_rad",
+                   "focal_px")
+
+
+def _rodrigues(w: np.ndarray) -> np.ndarray:
+    """(3, 3) exp([w]×): the rotation by the rotation vector ``w`` (3,) rad."""
+    a = float(np.linalg.norm(w))
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if a < 1e-12:
+        return np.eye(3) + k
+    return np.eye(3) + np.sin(a) / a * k + (1.0 - np.cos(a)) / a**2 * (k @ k)
 
 
 _CAMERA_KEYS = {"image_size", "P", "K", "R", "t", "centre", "dist", "source", "rms_px", "points_used",

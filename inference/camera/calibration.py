@@ -43,6 +43,9 @@ PRINCIPAL_POINT_MODES = ("prior", "centre", "free")
 PP_SIGMA_FRAC = 0.02
 #: Noise floor (px) of the covariance: clicks are never better than this, even when the fit is exact.
 NOISE_FLOOR_PX = 0.5
+#: RMS (px) above which a fit without lens distortion says that the lens may bend straight lines: careful
+#: clicks miss by about 1 px, and a lens with k1 ≈ −0.1 already leaves ~3 px on a 1080p court.
+DISTORTION_HINT_RMS_PX = 2.0
 #: Horizontal fields of view (degrees) tried as starts besides Zhang's closed form.
 FOV_STARTS_DEG = (15.0, 30.0, 45.0, 60.0, 80.0, 100.0)
 
@@ -432,22 +435,27 @@ def _suspects(res: np.ndarray, names: Sequence[str]) -> list[str]:
     return [n for n, r in zip(names, res) if r > max(3 * med, 4.0)]
 
 
-def _uncertainty(fit: _Fit) -> tuple[np.ndarray, float]:
+def _uncertainty(fit: _Fit, size: tuple[int, int]) -> tuple[np.ndarray, float, np.ndarray]:
     """1-σ of the camera centre (3,) and of the focal length from the Gauss-Newton covariance, with the
-    residual variance floored at :data:`NOISE_FLOOR_PX`²."""
+    residual variance floored at :data:`NOISE_FLOOR_PX`², and the (7, 7) covariance of the pose parameters
+    (:data:`inference.camera.POSE_PARAMETERS`: centre, rotation vector, focal; the lens distortion's own
+    uncertainty is folded into them)."""
     J = fit.jac
     n_p = len(fit.p)
     dof = max(fit.n_data - n_p, 1)
     s2 = max(fit.cost / dof, NOISE_FLOOR_PX**2)
     cov = s2 * np.linalg.pinv(J.T @ J)
     eps = 1e-6 * np.maximum(np.abs(fit.p), 1.0)
-    Jc = np.zeros((3, n_p))
+    cam = fit.camera(size)
+    Jq = np.zeros((7, n_p))
     for k in range(n_p):
         d = np.zeros(n_p)
         d[k] = eps[k]
-        Jc[:, k] = (fit.layout.centre_of(fit.p + d) - fit.layout.centre_of(fit.p - d)) / (2 * eps[k])
-    cov_c = Jc @ cov @ Jc.T
-    return np.sqrt(np.clip(np.diag(cov_c), 0, None)), float(np.sqrt(max(cov[0, 0], 0.0)))
+        Jq[:, k] = (cam.pose_difference(fit.layout.camera(fit.p + d, size))
+                    - cam.pose_difference(fit.layout.camera(fit.p - d, size))) / (2 * eps[k])
+    cov_q = Jq @ cov @ Jq.T
+    cov_q = 0.5 * (cov_q + cov_q.T)
+    return np.sqrt(np.clip(np.diag(cov_q[:3, :3]), 0, None)), float(np.sqrt(max(cov_q[6, 6], 0.0))), cov_q
 
 
 def _geometry_warnings(cam: Camera, image: np.ndarray, plane: PlaneFrame | None, n: int,
@@ -545,8 +553,12 @@ def calibrate(
     res = np.linalg.norm(cam.project(world) - image_px, axis=1)
     rms = float(np.sqrt(np.mean(res**2)))
     residuals = dict(zip(names, res.tolist()))
-    centre_sigma, focal_sigma = _uncertainty(fit)
+    centre_sigma, focal_sigma, pose_cov = _uncertainty(fit, size)
     warnings += _geometry_warnings(cam, image_px, plane, len(world), centre_sigma, focal_sigma)
+    if n_dist == 0 and rms > DISTORTION_HINT_RMS_PX:
+        warnings.append(f"the points fit with an RMS of {rms:.1f} px, more than clicks miss by: a lens that bends "
+                        "straight lines (wide angle) needs `--distortion 1` (or 2); if not, check the flagged "
+                        "points — the camera's stated uncertainty holds only for a lens model that fits")
     if lines is not None and len(lines):
         off = lines.residuals(cam.project)
         far = off > LINE_CLICK_OFF_PX
@@ -554,7 +566,7 @@ def calibrate(
                       f"than {LINE_CLICK_OFF_PX:g} px (up to {off.max():.0f} px): check that each is on the line it "
                       "names (court_line_points.csv)"] if far.any() else [])
     cam.rms_px, cam.residuals_px, cam.source = rms, residuals, "calibrated"
-    cam.meta.update(calibration_meta(method, centre_sigma, focal_sigma, warnings))
+    cam.meta.update(calibration_meta(method, centre_sigma, focal_sigma, warnings, pose_cov))
     return CalibrationResult(cam, names, residuals, rms, _suspects(res, names), method, centre_sigma,
                              focal_sigma, warnings)
 
@@ -615,10 +627,16 @@ def _general_fit(model: str, n_dist: int, principal_point: str, size: tuple[int,
     return free
 
 
-def calibration_meta(method: str, centre_sigma: np.ndarray, focal_sigma: float, warnings: Sequence[str]) -> dict:
-    """The camera.yaml keys that describe a calibration's quality (docs/formats.md §11)."""
-    return {"method": method, "centre_sigma_m": [round(float(v), 4) for v in centre_sigma],
-            "focal_sigma_px": round(float(focal_sigma), 2), "warnings": list(warnings)}
+def calibration_meta(method: str, centre_sigma: np.ndarray, focal_sigma: float, warnings: Sequence[str],
+                     pose_cov: np.ndarray | None = None) -> dict:
+    """The camera.yaml keys that describe a calibration's quality (docs/formats.md §11); ``pose_cov``: the
+    (7, 7) covariance of the pose (:data:`inference.camera.POSE_PARAMETERS`), which the 3D reconstruction adds
+    to its own uncertainty."""
+    out = {"method": method, "centre_sigma_m": [round(float(v), 4) for v in centre_sigma],
+           "focal_sigma_px": round(float(focal_sigma), 2), "warnings": list(warnings)}
+    if pose_cov is not None and np.all(np.isfinite(pose_cov)):
+        out["pose_cov"] = [[float(f"{v:.9g}") for v in row] for row in np.asarray(pose_cov, float)]
+    return out
 
 
 def calibrate_court(

@@ -28,7 +28,9 @@ class Setting:
         noise_px: σ of Gaussian noise added to the 2D ball (px).
         event_shift: events move by a random integer in [-k, k] frames.
         players: ``clip`` (players.csv if present), ``gt`` (gt/players.csv's court positions) or ``none``.
-        camera: ``gt`` (gt/camera.yaml) or ``clip`` (camera.yaml).
+        camera: ``gt`` (gt/camera.yaml), ``clip`` (camera.yaml) or ``clicked`` (calibrated here from the
+            clip's court_points.csv — `rally3d synth` draws them ±1 px off — with its pose covariance, as
+            `rally3d calibrate` writes it).
         seed: for the noise and shifts.
     """
 
@@ -82,7 +84,10 @@ class Scores:
 def prepare(clip: Clip, setting: Setting) -> tuple[Observations, np.ndarray, np.ndarray]:
     """The observations of a clip under a setting, and its ground truth (frames (G,), xyz (G, 3))."""
     rng = np.random.default_rng(setting.seed)
-    camera = clip.read_camera(gt=setting.camera == "gt")
+    if setting.camera == "clicked":
+        camera = clicked_camera(clip)
+    else:
+        camera = clip.read_camera(gt=setting.camera == "gt")
     events = clip.read_events()
     if setting.event_shift:
         shifted = events.frame + rng.integers(-setting.event_shift, setting.event_shift + 1, len(events))
@@ -105,6 +110,19 @@ def prepare(clip: Clip, setting: Setting) -> tuple[Observations, np.ndarray, np.
         obs = obs.with_track(obs.uv + rng.normal(0.0, setting.noise_px, obs.uv.shape))
     gt = clip.read_ball_3d(gt=True)
     return obs, gt.frame, gt.xyz
+
+
+def clicked_camera(clip: Clip):
+    """The camera calibrated from the clip's court_points.csv (normalised coordinates) on its court, with the
+    calibration's report in its meta (``pose_cov`` among it); with two radial distortion terms when the true
+    lens has distortion (as a user calibrating that lens would: `rally3d calibrate --distortion 2`)."""
+    from inference.camera.calibration import calibrate_court
+    from inference.court import load_court
+
+    true = clip.read_camera(gt=True)
+    size = true.image_size
+    pts = {n: (float(x) * size[0], float(y) * size[1]) for n, (x, y) in clip.read_court_points().as_dict().items()}
+    return calibrate_court(load_court(clip.court_path()), pts, size, n_dist=0 if true.dist is None else 2).camera
 
 
 def evaluate(clips: list[Clip], methods: dict, setting: Setting) -> dict[str, dict]:

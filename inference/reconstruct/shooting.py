@@ -1220,8 +1220,9 @@ def lm(problem: Problem, theta: np.ndarray, max_iter: int, flights: Flights | No
 class FrameErrorModel:
     """The reported per-frame error model of a fitted chain: frame positions' Jacobians (M, 3, 11) on their
     columns (M, 11) of θ, θ's covariance (n, n), the isotropic variance (m²), the along-ray model-error
-    vectors (M, 3: σ × unit line of sight) and each frame's flight factor k (M,). The covariance of frame m is
-    k (Jp Σ Jpᵀ + a aᵀ) + iso I."""
+    vectors (M, 3: σ × unit line of sight) and each frame's flight factor k (M,); with a calibrated camera's
+    pose covariance Σc (7, 7), the frames' response to the camera's pose T (M, 3, 7). The covariance of frame
+    m is k (Jp Σ Jpᵀ + a aᵀ) + T Σc Tᵀ + iso I."""
 
     frames: np.ndarray
     xyz: np.ndarray
@@ -1236,11 +1237,20 @@ class FrameErrorModel:
     ray: np.ndarray         # (M, 3) unit line of sight
     flight_chi2: np.ndarray  # (flights,) mean squared normalised reprojection residual per 2D coordinate
     factor: np.ndarray       # (M,) covariance factor of the frame's flight (Uncertainty.flight_factor)
+    camera_jac: np.ndarray | None = None   # (M, 3, 7) d(frame position)/d(camera pose) after the refit
+    camera_cov: np.ndarray | None = None   # (7, 7) the camera's pose covariance (Camera.pose_covariance)
+
+    def camera_part(self) -> np.ndarray:
+        """(M, 3, 3) the covariance the camera's own uncertainty adds (zeros without one)."""
+        if self.camera_jac is None or self.camera_cov is None:
+            return np.zeros((len(self.frames), 3, 3))
+        return np.einsum("mdk,kl,mel->mde", self.camera_jac, self.camera_cov, self.camera_jac)
+
     def covariances(self) -> np.ndarray:
         """(M, 3, 3)."""
         sub = self.theta_cov[self.cols[:, :, None], self.cols[:, None, :]]                # (M, 11, 11)
         out = np.einsum("mdc,mce,mfe->mdf", self.jac, sub, self.jac) + np.einsum("mi,mj->mij", self.along, self.along)
-        return self.factor[:, None, None] * out + self.iso_var * np.eye(3)[None]
+        return self.factor[:, None, None] * out + self.camera_part() + self.iso_var * np.eye(3)[None]
 
     def draw(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """(n, M, 3) errors drawn from this model jointly, as a perfectly calibrated fit would make them: one
@@ -1253,6 +1263,10 @@ class FrameErrorModel:
         flights = rng.standard_normal((n, int(self.own.max()) + 1 if len(self.own) else 0))
         out += flights[:, self.own, None] * self.along[None]
         out *= np.sqrt(self.factor)[None, :, None]
+        if self.camera_jac is not None and self.camera_cov is not None:   # one camera error for every frame
+            wc, Vc = np.linalg.eigh(self.camera_cov)
+            zc = (rng.standard_normal((n, 7)) * np.sqrt(np.maximum(wc, 0.0))) @ Vc.T
+            out += np.einsum("mdk,sk->smd", self.camera_jac, zc)
         return out + np.sqrt(self.iso_var) * rng.standard_normal(out.shape)
 
 
@@ -1273,11 +1287,14 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
     s2 = max(float(wr @ wr) / dof, 1.0) * (inflation * cal.scale)**2
     A = (sol.J.T @ sol.J).toarray()
     try:
-        cov = np.linalg.pinv(A, hermitian=True) * s2
+        A_inv = np.linalg.pinv(A, hermitian=True)
     except np.linalg.LinAlgError:
         return None
+    cov = A_inv * s2
     dP = (fl.P[own, 1:, j] - fl.P[own, :1, j]) / EPS[None, :, None]             # (M, N_IN, 3)
     Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
+    cam_cov = problem.obs.camera.pose_covariance()
+    cam_jac = None if cam_cov is None else camera_response(problem, sol, A_inv, Jp, own, cols=problem.cols[own])
     ray = xyz - problem.obs.camera.centre
     ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
     if cal.along_scale != 1.0:
@@ -1287,7 +1304,33 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
     along = (cal.along_ray_rate(free) * t)[:, None] * ray
     chi2 = flight_chi2(problem, taus)
     return FrameErrorModel(frames, xyz, own, Jp, problem.cols[own], cov, floor_m**2 + cal.floor_m**2, along,
-                           free, t, ray, chi2, cal.flight_factor(chi2)[own])
+                           free, t, ray, chi2, cal.flight_factor(chi2)[own], cam_jac, cam_cov)
+
+
+#: finite-difference steps of the camera pose (:data:`inference.camera.POSE_PARAMETERS`): m, rad, px
+CAMERA_STEPS = np.array([1e-3, 1e-3, 1e-3, 1e-5, 1e-5, 1e-5, 0.1])
+
+
+def camera_response(problem: Problem, sol: Solution, A_inv: np.ndarray, Jp: np.ndarray, own: np.ndarray,
+                    cols: np.ndarray) -> np.ndarray:
+    """(M, 3, 7) how the fitted frame positions move with the camera's pose (implicit function theorem at the
+    optimum: dθ/dq = −(JᵀJ)⁻¹ Jᵀ ∂r/∂q, the 2D residuals being the only ones that see the camera; then
+    the frames' Jacobians ``Jp`` (M, 3, 11) on their θ columns ``cols`` (M, 11)). ``A_inv``: (JᵀJ)⁻¹."""
+    cam = problem.obs.camera
+    fl, taus = sol.aux["flights"], sol.aux["taus"]
+    own_o = problem.owners(problem.frames, taus)
+    pts = fl.P[own_o, 0, problem.index(fl, own_o, problem.frames)]              # (F, 3) fitted, at the 2D points
+    w = problem.weights / problem.cfg.pixel_sigma
+    dr = np.zeros((2 * len(pts), 7))
+    for k, h in enumerate(CAMERA_STEPS):
+        dq = np.zeros(7)
+        dq[k] = h
+        d = (cam.perturbed(dq).project(pts) - cam.perturbed(-dq).project(pts)) / (2 * h)
+        dr[:, k] = (np.nan_to_num(d) * w[:, None]).reshape(-1)
+    n_obs = 2 * len(problem.frames)
+    dtheta = -A_inv @ (sol.J[:n_obs].T @ dr)                                     # (n, 7)
+    out = np.einsum("mdc,mck->mdk", Jp, dtheta[cols])
+    return out if np.all(np.isfinite(out)) else None
 
 
 def flight_chi2(problem: Problem, taus: np.ndarray) -> np.ndarray:

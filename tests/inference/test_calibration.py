@@ -93,6 +93,10 @@ def test_floor_points_with_radial_distortion_on_request(padel):
     assert fitted.rms_px < 0.6 < plain.rms_px
     assert abs(fitted.camera.dist[0] + 0.15) < 0.03
     assert np.linalg.norm(fitted.camera.centre - true.centre) < 0.2
+    # the plain fit says what its RMS means (its pose covariance cannot hold a lens model that does not fit)
+    assert plain.rms_px > 2.0 and any("--distortion" in w for w in plain.warnings), plain.warnings
+    assert not any("--distortion" in w for w in fitted.warnings)
+    assert fitted.camera.pose_covariance() is not None and fitted.camera.meta["pose_cov"]
 
 
 def test_camera_looking_straight_down_is_flagged(padel):
