@@ -96,7 +96,7 @@ class Uncertainty:
     the 2D noise, the contact times and the priors as the fit states them; ``scale`` corrects their stated
     widths, the along-ray term stands for what the flight model leaves out (drag, spin, the bounce), which the
     2D track cannot see across the line of sight; ``along_scale`` corrects the Gauss-Newton width along the
-    ray apart from across it (on simulated rallies it states the depth about 1.25× wider, relative to across,
+    ray apart from across it (on simulated rallies it states the depth 1.1–1.3× wider, relative to across,
     than the errors are). Fitted per sport on synthetic clips of seeds that
     the accuracy benchmark never uses, by the coverage of the 1-σ / 2-σ ellipsoids and along / across the ray
     (``bench/bench_joint.py --calibrate``).
@@ -1294,7 +1294,7 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
     dP = (fl.P[own, 1:, j] - fl.P[own, :1, j]) / EPS[None, :, None]             # (M, N_IN, 3)
     Jp = np.einsum("mkd,mkc->mdc", dP, problem.M[own])                          # (M, 3, 11)
     cam_cov = problem.obs.camera.pose_covariance()
-    cam_jac = None if cam_cov is None else camera_response(problem, sol, A_inv, Jp, own, cols=problem.cols[own])
+    cam_jac = None if cam_cov is None else camera_response(problem, sol, A_inv, Jp, problem.cols[own])
     ray = xyz - problem.obs.camera.centre
     ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
     if cal.along_scale != 1.0:
@@ -1311,11 +1311,12 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
 CAMERA_STEPS = np.array([1e-3, 1e-3, 1e-3, 1e-5, 1e-5, 1e-5, 0.1])
 
 
-def camera_response(problem: Problem, sol: Solution, A_inv: np.ndarray, Jp: np.ndarray, own: np.ndarray,
-                    cols: np.ndarray) -> np.ndarray:
+def camera_response(problem: Problem, sol: Solution, A_inv: np.ndarray, Jp: np.ndarray,
+                    cols: np.ndarray) -> np.ndarray | None:
     """(M, 3, 7) how the fitted frame positions move with the camera's pose (implicit function theorem at the
     optimum: dθ/dq = −(JᵀJ)⁻¹ Jᵀ ∂r/∂q, the 2D residuals being the only ones that see the camera; then
-    the frames' Jacobians ``Jp`` (M, 3, 11) on their θ columns ``cols`` (M, 11)). ``A_inv``: (JᵀJ)⁻¹."""
+    the frames' Jacobians ``Jp`` (M, 3, 11) on their θ columns ``cols`` (M, 11)). ``A_inv``: (JᵀJ)⁻¹. A fitted
+    point behind the camera contributes nothing; None when the result is not finite."""
     cam = problem.obs.camera
     fl, taus = sol.aux["flights"], sol.aux["taus"]
     own_o = problem.owners(problem.frames, taus)
