@@ -32,7 +32,7 @@ from .plan import Plan, PlanContact
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
 from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain,
-                       FrameErrorModel, frame_error_model, net_height, solve)
+                       FrameErrorModel, depth_report, frame_error_model, net_height, solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
 
@@ -725,6 +725,11 @@ def _segment_fits(obs: Observations, segs: list[Segment], fit: ChainFit, cfg: Jo
             spin=theta[start_flight.spin].copy() if start_flight.spin is not None else np.zeros(3),
             drag_k=pb.model.drag_k * (theta[start_flight.drag] if start_flight.drag is not None else 1.0),
             reproj_rms_px=rms, n_observed=int(seen.sum()))
+        if em is not None:
+            k_main = int(np.bincount(own[m]).argmax())                  # the chain flight with most of its frames
+            ratios = em.depth_cues.get(k_main, {})
+            sf.figures["depth_from"] = depth_report(ratios)
+            sf.figures["depth_cues"] = {g: (round(r, 2) if np.isfinite(r) else None) for g, r in ratios.items()}
         if flags:
             sf.figures["flags"] = flags
         if notes:

@@ -411,6 +411,8 @@ class _Rows:
         self.r: list[np.ndarray] = []
         self.pending: list[tuple[int, int, object]] = []
         self.m = 0
+        self.group = ""                                   # what the rows added next stand for (DEPTH_CUES)
+        self.groups: list[tuple[int, int, str]] = []      # (first row, rows, group) of every block
 
     def add(self, r: np.ndarray, blocks=None) -> None:
         """r: (R,) residuals; blocks(): [(cols (R, k) or (k,), values (R, k))] (called only with a Jacobian)."""
@@ -420,6 +422,7 @@ class _Rows:
             return
         if self.jac and blocks is not None:
             self.pending.append((self.m, R, blocks))
+        self.groups.append((self.m, R, self.group))
         self.r.append(r)
         self.m += R
 
@@ -624,9 +627,11 @@ class Problem:
             d = d.transpose(0, 2, 1).reshape(-1, N_IN)
             return through(np.repeat(own, 2), d)
 
+        rows.group = "track"
         rows.add((r * w[:, None]).reshape(-1), reproj_blocks)
 
         # continuity: a flight ends at its end contact
+        rows.group = "continuity"
         for s, f in enumerate(ch.flights):
             if f.end is None:
                 continue
@@ -642,27 +647,36 @@ class Problem:
             rows.add((fl.end[s, 0] - ch.point(theta, f.end)) / cfg.continuity_sigma, cont_blocks)
 
         if self.physics:
+            rows.group = "bounce"
             self._bounces(theta, fl, taus, rows, through)
+            rows.group = "court"
             self._court(fl, taus, rows, through)
+            rows.group = "picture edge"
             self._beyond(fl, taus, rows, through)
+        rows.group = "net"
         self._net(fl, taus, rows, through)
+        rows.group = "hitter"
         self._hits(theta, rows)
+        rows.group = "free end"
         self._free_ends(theta, rows)
 
         # contact-time prior, spin and drag priors
         tau_idx = np.array([ct.tau for ct in ch.contacts])
         ev = self.event_frames
+        rows.group = "timing"
         rows.add((theta[tau_idx] - ev) / cfg.tau_sigma,
                  lambda: [(tau_idx[:, None], np.full((len(ev), 1), 1.0 / cfg.tau_sigma))])
         spin = np.array([f.spin for f in ch.flights if f.spin is not None], np.int64).reshape(-1)
+        rows.group = "spin"
         if len(spin):
             rows.add(theta[spin] / cfg.spin_sigma,
                      lambda: [(spin[:, None], np.full((len(spin), 1), 1.0 / cfg.spin_sigma))])
         drag = np.array([f.drag for f in ch.flights if f.drag is not None], np.int64)
+        rows.group = "drag"
         if len(drag):
             rows.add((theta[drag] - 1.0) / cfg.drag_sigma,
                      lambda: [(drag[:, None], np.full((len(drag), 1), 1.0 / cfg.drag_sigma))])
-        return rows, {"flights": fl, "owners": own, "taus": taus}
+        return rows, {"flights": fl, "owners": own, "taus": taus, "groups": rows.groups}
 
     def incoming(self, theta: np.ndarray, fl: Flights, taus: np.ndarray, c: int):
         """The flight arriving at contact c: (flight index, v_in (3,), ω_in (3,), dv_in/dinputs (N_IN, 3) or
@@ -1239,6 +1253,7 @@ class FrameErrorModel:
     factor: np.ndarray       # (M,) covariance factor of the frame's flight (Uncertainty.flight_factor)
     camera_jac: np.ndarray | None = None   # (M, 3, 7) d(frame position)/d(camera pose) after the refit
     camera_cov: np.ndarray | None = None   # (7, 7) the camera's pose covariance (Camera.pose_covariance)
+    depth_cues: dict = field(default_factory=dict)   # chain flight → {cue: σ ratio without it} (depth_cues)
 
     def camera_part(self) -> np.ndarray:
         """(M, 3, 3) the covariance the camera's own uncertainty adds (zeros without one)."""
@@ -1297,6 +1312,7 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
     cam_jac = None if cam_cov is None else camera_response(problem, sol, A_inv, Jp, problem.cols[own])
     ray = xyz - problem.obs.camera.centre
     ray /= np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
+    cues = depth_cues(sol, A_inv, Jp, problem.cols[own], ray, own)
     if cal.along_scale != 1.0:
         Jp = np.einsum("mij,mjc->mic", cal.shape(ray), Jp)                      # the width along the ray apart
     t = np.min(np.abs(frames[:, None] - taus[None, :]), axis=1) / problem.fps          # (M,) s
@@ -1304,7 +1320,67 @@ def frame_error_model(problem: Problem, sol: Solution, inflation: float = 1.0, f
     along = (cal.along_ray_rate(free) * t)[:, None] * ray
     chi2 = flight_chi2(problem, taus)
     return FrameErrorModel(frames, xyz, own, Jp, problem.cols[own], cov, floor_m**2 + cal.floor_m**2, along,
-                           free, t, ray, chi2, cal.flight_factor(chi2)[own], cam_jac, cam_cov)
+                           free, t, ray, chi2, cal.flight_factor(chi2)[own], cam_jac, cam_cov, cues)
+
+
+#: the fit's evidence on a flight's depth besides its 2D track (``_Rows.group``) → words for the report
+DEPTH_CUES = {"bounce": "the bounce (its impact model)", "timing": "the events' timing (the flight time)",
+              "hitter": "the racket hit (the hitter's position and reach)", "court": "the court (floor and walls)",
+              "picture edge": "where the ball left the picture", "net": "the net",
+              "free end": "the free end's speed prior", "spin": "the spin prior", "drag": "the drag prior"}
+#: frames per flight whose along-ray σ is compared (evenly spaced: the cost stays small on long flights)
+DEPTH_CUE_FRAMES = 8
+#: a σ ratio beyond this: without the cue the depth is not determined
+UNDETERMINED_RATIO = 100.0
+
+
+def depth_cues(sol: Solution, A_inv: np.ndarray, Jp: np.ndarray, cols: np.ndarray, ray: np.ndarray,
+               own: np.ndarray) -> dict[int, dict[str, float]]:
+    """Per chain flight (``own``: (M,) each frame's flight), how much each piece of evidence besides the 2D
+    track pins its depth: the ratio of the along-ray σ without that evidence (its rows of the fit's Jacobian
+    removed: (A − J_gᵀJ_g)⁻¹ by the Woodbury identity) to the σ with everything, on up to
+    :data:`DEPTH_CUE_FRAMES` of its frames; ``inf`` when the depth is not determined without it. Only the
+    cues of :data:`DEPTH_CUES` that the fit used. ``Jp`` (M, 3, 11) on θ columns ``cols`` (M, 11), ``ray`` (M,
+    3) unit lines of sight, ``A_inv`` (JᵀJ)⁻¹."""
+    J = sol.J.tocsr()
+    groups: dict[str, list[int]] = {}
+    for m0, R, g in sol.aux.get("groups", []):
+        if g in DEPTH_CUES:
+            groups.setdefault(g, []).extend(range(m0, m0 + R))
+    out: dict[int, dict[str, float]] = {}
+    n = A_inv.shape[0]
+    for k in np.unique(own):
+        idx = np.flatnonzero(own == k)
+        idx = idx[np.unique(np.linspace(0, len(idx) - 1, min(DEPTH_CUE_FRAMES, len(idx))).round().astype(int))]
+        a = np.zeros((len(idx), n))                                   # (F, n): d(depth along the ray)/dθ
+        np.add.at(a, (np.arange(len(idx))[:, None], cols[idx]), np.einsum("fd,fdc->fc", ray[idx], Jp[idx]))
+        Ba = A_inv @ a.T                                              # (n, F)
+        base = float(np.mean(np.einsum("fn,nf->f", a, Ba)))
+        if not base > 0:
+            continue
+        ratios = {}
+        for g, rws in groups.items():
+            G = J[rws].toarray()                                      # (R_g, n)
+            Mg = np.eye(len(rws)) - G @ A_inv @ G.T
+            u = G @ Ba                                                # (R_g, F)
+            if not np.any(np.abs(u) > 1e-12 * max(np.abs(a).max(), 1.0)):
+                continue                                              # these rows do not touch the depth here
+            w, V = np.linalg.eigh(0.5 * (Mg + Mg.T))
+            extra = float(np.mean(np.sum((V.T @ u) ** 2 / np.maximum(w, 1e-12)[:, None], axis=0)))
+            r = float(np.sqrt((base + extra) / base))
+            ratios[g] = r if r < UNDETERMINED_RATIO else float("inf")
+        out[int(k)] = ratios
+    return out
+
+
+def depth_report(ratios: dict[str, float], threshold: float = 1.25) -> str:
+    """One line on what decided a flight's depth: the cue whose absence widens the along-ray σ most (when by
+    more than ``threshold``), else the 2D track and the flight's physics."""
+    if not ratios or max(ratios.values()) < threshold:
+        return "the 2D track and the flight's physics (no other evidence widens its depth σ by 25 % or more)"
+    g, r = max(ratios.items(), key=lambda kv: kv[1])
+    how = "undetermined" if not np.isfinite(r) else f"{r:.1f}× as wide"
+    return f"{DEPTH_CUES[g]} (without it the depth σ would be {how})"
 
 
 #: finite-difference steps of the camera pose (:data:`inference.camera.POSE_PARAMETERS`): m, rad, px
