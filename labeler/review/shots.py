@@ -317,6 +317,7 @@ class Shot:
         net_clearance_m: height of the ball's bottom above the net top where it crosses the net plane
             (negative = below the top: it hit or went through the net; NaN if it did not cross).
         no_3d: why the shot has no trustworthy 3D ("" when it has): then no figure, no call, verdict ``-``.
+        depth_from: what pinned its flight's depth along the line of sight (segments.json; "" unknown).
     """
 
     index: int
@@ -333,6 +334,7 @@ class Shot:
     bounce_speed_kmh: float = float("nan")
     net_clearance_m: float = float("nan")
     no_3d: str = ""
+    depth_from: str = ""
 
     @property
     def first_bounce(self) -> BounceCall | None:
@@ -652,13 +654,15 @@ def looks_like_serve(rules: CourtRules, traj: Trajectory, team: str, hit: Contac
 
 @dataclass(frozen=True)
 class Flight:
-    """One flight of segments.json: frames ``start … end``; ``reason`` why it failed ("" if reconstructed)."""
+    """One flight of segments.json: frames ``start … end``; ``reason`` why it failed ("" if reconstructed);
+    ``depth_from``: what pinned its depth along the camera's line of sight ("" when not said)."""
 
     index: int
     start: int
     end: int
     reconstructed: bool
     reason: str = ""
+    depth_from: str = ""
 
 
 def flights_of(segments: list) -> list[Flight]:
@@ -674,7 +678,8 @@ def flights_of(segments: list) -> list[Flight]:
         ok = s.get("reconstructed") is True
         idx = s.get("index")
         idx = idx if isinstance(idx, int) and not isinstance(idx, bool) else -1
-        out.append(Flight(idx, a, b, ok, "" if ok else str(s.get("reason") or "failed its checks")))
+        depth = s.get("depth_from") if ok and isinstance(s.get("depth_from"), str) else ""
+        out.append(Flight(idx, a, b, ok, "" if ok else str(s.get("reason") or "failed its checks"), depth))
     return out
 
 
@@ -686,6 +691,15 @@ def no_3d_reason(start: int, end: int, traj: Trajectory, flights: list[Flight]) 
         return "; ".join(f"flight {f.start}–{f.end} failed: {f.reason}" for f in failed)
     inner = traj.window(start + 1, end - 1) if end - start > 1 else traj.window(start, end)
     return "" if len(inner[0]) else f"no 3D rows for frames {start}–{end}"
+
+
+def depth_from(start: int, end: int, flights: list[Flight]) -> str:
+    """What pinned the depth of the reconstructed flight leaving the hit at ``start`` (the first one that
+    overlaps frames ``start … end``), "" when segments.json does not say."""
+    for f in flights:
+        if f.reconstructed and f.start < end and f.end > start and f.depth_from:
+            return f.depth_from
+    return ""
 
 
 def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: float, *,
@@ -728,7 +742,8 @@ def analyse_rally(court: Court, traj: Trajectory, contacts: list[Contact], fps: 
             continue
         verdict, reason, calls = judge_shot(rules, team, inner, serve=serve, server_x=float(hit.position[0]),
                                             volleyed=j < len(contacts))
-        shot = Shot(n, team, bool(serve), hit, int(end), list(inner), calls, verdict, reason)
+        shot = Shot(n, team, bool(serve), hit, int(end), list(inner), calls, verdict, reason,
+                    depth_from=depth_from(hit.frame, int(end), flights or []))
         _add_figures(shot, court, traj, fps)
         shots.append(shot)
     return RallyAnalysis(shots, pre_calls, rules.sport, plausibility)
@@ -862,10 +877,11 @@ CSV_COLUMNS = ("shot", "team", "serve", "hit_frame", "end_frame", "hit_x_m", "hi
                "launch_speed_kmh", "max_speed_kmh", "net_clearance_m", "bounce_frame", "bounce_x_m",
                "bounce_y_m", "bounce_speed_kmh", "call", "line_distance_cm", "nearest_line", "target",
                "verdict", "reason", "contacts", "status", "no_3d_reason", "line_sigma_cm",
-               "too_close_to_call", "call_note")
+               "too_close_to_call", "call_note", "depth_from")
 """shots.csv's columns. ``status``: ``ok`` or ``no 3D`` (then ``no_3d_reason`` says why and no figure or call
 is given); ``line_sigma_cm``: 1-σ of the first bounce across its line; ``too_close_to_call``: 1 when the line
-is within 2σ, 0 when not, empty when σ is unknown or nothing was judged; ``call_note``: that in words."""
+is within 2σ, 0 when not, empty when σ is unknown or nothing was judged; ``call_note``: that in words;
+``depth_from``: what pinned the shot's depth along the camera's line of sight (segments.json)."""
 
 
 def shot_rows(analysis: RallyAnalysis) -> list[dict]:
@@ -893,6 +909,7 @@ def shot_rows(analysis: RallyAnalysis) -> list[dict]:
             "too_close_to_call": ("" if b is None or not b.judged or not math.isfinite(b.sigma_cm)
                                   else int(b.uncertain)),
             "call_note": "" if b is None else sigma_note(b),
+            "depth_from": s.depth_from,
         })
     return rows
 

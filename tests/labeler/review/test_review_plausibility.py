@@ -323,3 +323,6 @@ def test_d_shots_csv_keeps_its_columns_and_adds_status_and_sigma(failed_clip, tm
     assert [r["status"] for r in rows] == ["no 3D" if k == 1 else "ok" for k in range(len(sample_shots()))]
     assert float(rows[0]["line_sigma_cm"]) > 0 and rows[0]["too_close_to_call"] == "0"
     assert SCRIPT in rows[1]["no_3d_reason"]  # the CSV keeps the text as it is (no HTML here)
+    # what pinned each reconstructed shot's depth (segments.json's depth_from); nothing for the shot without 3D
+    assert header[-1] == "depth_from" and rows[1]["depth_from"] == ""
+    assert all(r["depth_from"].startswith("the ") for r in rows if r["status"] == "ok"), [r["depth_from"] for r in rows]
