@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -141,26 +141,24 @@ def calibrated(r: dict, u: Uncertainty) -> np.ndarray:
     return k * (u.scale**2 * S @ r["cov"] @ S + model) + u.floor_m**2 * np.eye(3)
 
 
+def coverage_figures(d: np.ndarray, C: np.ndarray, ray: np.ndarray) -> np.ndarray:
+    """(6,) of errors ``d`` (F, 3) against covariances ``C`` (F, 3, 3): the 1-σ and 2-σ ellipsoid coverage, and
+    the 1-σ and 2-σ marginal coverage along the lines of sight ``ray`` (F, 3) and across them (:data:`GAUSS_ALL`
+    when calibrated)."""
+    m2 = np.einsum("ni,nij,nj->n", d, np.linalg.inv(C), d)
+    c = direction_coverage(d, C, ray)
+    return np.array([np.mean(m2 <= 1), np.mean(m2 <= 4), *c["along"], *c["across"]])
+
+
 def coverage_per_clip(rows: list[dict], u: Uncertainty) -> np.ndarray:
-    """(clips, 6) of each clip's covariances calibrated by ``u`` (:func:`calibrated`): the 1-σ and 2-σ
-    ellipsoid coverage, and the 1-σ and 2-σ marginal coverage along the line of sight and across it."""
-    out = []
-    for r in rows:
-        C = calibrated(r, u)
-        m2 = np.einsum("ni,nij,nj->n", r["d"], np.linalg.inv(C), r["d"])
-        c = direction_coverage(r["d"], C, r["ray"])
-        out.append((np.mean(m2 <= 1), np.mean(m2 <= 4), *c["along"], *c["across"]))
-    return np.array(out)
+    """(clips, 6) :func:`coverage_figures` of each clip's covariances calibrated by ``u`` (:func:`calibrated`)."""
+    return np.array([coverage_figures(r["d"], calibrated(r, u), r["ray"]) for r in rows])
 
 
 def pooled_coverage(rows: list[dict], u: Uncertainty) -> np.ndarray:
     """(6,) as :func:`coverage_per_clip`, over the frames of all ``rows`` together."""
-    d = np.concatenate([r["d"] for r in rows])
-    ray = np.concatenate([r["ray"] for r in rows])
-    C = np.concatenate([calibrated(r, u) for r in rows])
-    m2 = np.einsum("ni,nij,nj->n", d, np.linalg.inv(C), d)
-    c = direction_coverage(d, C, ray)
-    return np.array([np.mean(m2 <= 1), np.mean(m2 <= 4), *c["along"], *c["across"]])
+    return coverage_figures(np.concatenate([r["d"] for r in rows]), np.concatenate([calibrated(r, u) for r in rows]),
+                            np.concatenate([r["ray"] for r in rows]))
 
 
 def calibrate(rows: list[dict]) -> tuple[Uncertainty, float]:
@@ -248,9 +246,7 @@ def direction_table(rows: list[dict]) -> str:
            "|---|---|---|---|---|---|---|---|"]
     for name, d, cov, ray in [(r["name"], r["d"], r["cov"], r["ray"]) for r in rows] + [
             ("**all frames**", *(np.concatenate([r[k] for r in rows]) for k in ("d", "cov", "ray")))]:
-        m2 = np.einsum("ni,nij,nj->n", d, np.linalg.inv(cov), d)
-        c = direction_coverage(d, cov, ray)
-        got = np.array([np.mean(m2 <= 1), np.mean(m2 <= 4), *c["along"], *c["across"]])
+        got = coverage_figures(d, cov, ray)
         off = np.abs(got - GAUSS_ALL).max()
         out.append("| " + " | ".join([name, *(f"{x:.2f}" for x in got), f"{100 * off:.0f}"]) + " |")
     return "\n".join(out)

@@ -1342,11 +1342,16 @@ def depth_cues(sol: Solution, A_inv: np.ndarray, Jp: np.ndarray, cols: np.ndarra
     :data:`DEPTH_CUE_FRAMES` of its frames; ``inf`` when the depth is not determined without it. Only the
     cues of :data:`DEPTH_CUES` that the fit used. ``Jp`` (M, 3, 11) on θ columns ``cols`` (M, 11), ``ray`` (M,
     3) unit lines of sight, ``A_inv`` (JᵀJ)⁻¹."""
-    J = sol.J.tocsr()
-    groups: dict[str, list[int]] = {}
+    rows: dict[str, list[int]] = {}
     for m0, R, g in sol.aux.get("groups", []):
         if g in DEPTH_CUES:
-            groups.setdefault(g, []).extend(range(m0, m0 + R))
+            rows.setdefault(g, []).extend(range(m0, m0 + R))
+    # per cue, once for every flight: its rows G (R_g, n) and I − G A⁻¹ Gᵀ = V diag(w) Vᵀ (Woodbury's middle)
+    groups = {}
+    for g, rws in rows.items():
+        G = sol.J[rws].toarray()
+        w, V = np.linalg.eigh(np.eye(len(rws)) - G @ A_inv @ G.T)
+        groups[g] = (G, np.maximum(w, 1e-12), V)
     out: dict[int, dict[str, float]] = {}
     n = A_inv.shape[0]
     for k in np.unique(own):
@@ -1359,14 +1364,11 @@ def depth_cues(sol: Solution, A_inv: np.ndarray, Jp: np.ndarray, cols: np.ndarra
         if not base > 0:
             continue
         ratios = {}
-        for g, rws in groups.items():
-            G = J[rws].toarray()                                      # (R_g, n)
-            Mg = np.eye(len(rws)) - G @ A_inv @ G.T
+        for g, (G, w, V) in groups.items():
             u = G @ Ba                                                # (R_g, F)
             if not np.any(np.abs(u) > 1e-12 * max(np.abs(a).max(), 1.0)):
                 continue                                              # these rows do not touch the depth here
-            w, V = np.linalg.eigh(0.5 * (Mg + Mg.T))
-            extra = float(np.mean(np.sum((V.T @ u) ** 2 / np.maximum(w, 1e-12)[:, None], axis=0)))
+            extra = float(np.mean(np.sum((V.T @ u) ** 2 / w[:, None], axis=0)))
             r = float(np.sqrt((base + extra) / base))
             ratios[g] = r if r < UNDETERMINED_RATIO else float("inf")
         out[int(k)] = ratios
