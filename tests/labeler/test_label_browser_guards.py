@@ -79,7 +79,9 @@ def test_keyboard_leaves_fields_picks_typed_point_and_interpolates_inside_one_fl
     # court point by keyboard: type part of a name + Enter selects it; the next click is saved under it
     press(page, "m", 2)
     wait_until(lambda: view.mode == "court", what="court mode")
-    page.get_by_role("tab", name="Court").click()
+    # the panel's tab follows the mode from the server: wait for it rather than race it with a click
+    wait_until(lambda: page.get_by_role("tab", name="Court").get_attribute("aria-selected") == "true",
+               what="the Court tab shown by M M")
     combo = page.get_by_role("combobox", name="point")
     combo.click()
     combo.press_sequentially("near_service_ri")
