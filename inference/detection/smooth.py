@@ -7,6 +7,13 @@ gate that the next measurement confirms). An isolated measurement outside the ga
 does not confirm is an outlier and is dropped (its row becomes "not visible"). Each piece is then
 smoothed backwards (RTS), so the positions of a flight use the frames after them as well as before.
 
+Before that, *islands* are dropped (:func:`off_track_islands`): a short run of detections, cut from the rest
+by gaps or jumps, that lies far from where the track around it says the ball was — a detector that found
+a player's head or a shoe for a few frames while the ball itself was lost. The track on both sides must
+agree on one smooth path across the island (a quadratic through both sides fits them), the island must
+lie far from it, and the sides must be at least as long as the island: a short real piece between two
+contacts bends the path there, so the sides do not agree on one curve and nothing is dropped.
+
 Units are pixels of the original frame; the defaults are for 1280-px-wide video and scale with width.
 """
 from __future__ import annotations
@@ -30,6 +37,16 @@ class SmootherConfig:
         max_gap_s: a longer gap without detections starts a new piece.
         gate_chi2: normalised innovation squared above which a measurement does not fit the flight.
         min_piece: pieces with fewer detections are left unsmoothed (kept as measured).
+        island_max_s: runs of detections at most this long may be judged off the track (0: never).
+        island_context_s: two runs at most this far apart (the gap across the island) give the path across
+            it, from their detections within ``island_side_s`` of the gap; each run holds 4+ detections, both
+            together ``island_min_context`` and twice the island's.
+        island_off, island_ratio, island_max_rms: an island is off the track when its median distance from
+            that path is over ``island_off`` × the frame width and ``island_ratio`` × the path's RMS on its
+            sides, and the path fits its sides within ``island_max_rms`` × the width.
+        island_max_acc: the path's acceleration is at most this × the width per s² (a ball's, under gravity and
+            perspective, is far less: a path bent more than that joins pieces of two things).
+        island_jump: a step larger than this × the width per frame starts a new run.
     """
 
     meas_sigma_px: float = 2.5
@@ -37,6 +54,15 @@ class SmootherConfig:
     max_gap_s: float = 0.25
     gate_chi2: float = GATE_CHI2_2DOF
     min_piece: int = 4
+    island_max_s: float = 0.3
+    island_context_s: float = 0.8
+    island_side_s: float = 0.3
+    island_min_context: int = 5
+    island_off: float = 0.03
+    island_ratio: float = 6.0
+    island_max_acc: float = 3.0
+    island_max_rms: float = 0.03
+    island_jump: float = 0.04
 
     def __post_init__(self) -> None:
         for name in ("meas_sigma_px", "jerk_psd", "max_gap_s", "gate_chi2"):
@@ -45,6 +71,12 @@ class SmootherConfig:
                 raise ValueError(f"SmootherConfig.{name} must be a positive number, got {v!r}")
         if self.min_piece < 1:
             raise ValueError(f"SmootherConfig.min_piece must be ≥ 1, got {self.min_piece}")
+        for name in ("island_max_s", "island_context_s", "island_side_s", "island_off", "island_ratio", "island_max_rms",
+                     "island_max_acc", "island_jump"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v < 0:
+                raise ValueError(f"SmootherConfig.{name} must be a number ≥ 0 (island_max_s 0: no islands "
+                                 f"dropped), got {v!r}")
 
 
 @dataclass
@@ -159,6 +191,69 @@ def split_pieces(frames: np.ndarray, z: np.ndarray, fps: float, cfg: SmootherCon
     return [np.asarray(p) for p in pieces], outliers
 
 
+def _runs(frames: np.ndarray, z: np.ndarray, jump: float) -> list[np.ndarray]:
+    """Index runs of detections ``(frames (M,), z (M, 2) px)``: consecutive ones at most 2 frames apart whose
+    step per frame stays below ``jump`` px."""
+    if not len(frames):
+        return []
+    gap = np.diff(frames)
+    step = np.linalg.norm(np.diff(z, axis=0), axis=1) / np.maximum(gap, 1)
+    cut = np.flatnonzero((gap > 2) | (step > jump)) + 1
+    return np.split(np.arange(len(frames)), cut)
+
+
+def _bridge(frames: np.ndarray, z: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """A quadratic in time through ``z (K, 2)`` at ``frames (K,)``: its positions at ``at``, its largest
+    residual (px) and its acceleration (px per frame²)."""
+    t0 = float(np.mean(frames))
+    A = np.vander(frames - t0, 3)
+    coef, *_ = np.linalg.lstsq(A, z, rcond=None)
+    worst = float(np.max(np.linalg.norm(A @ coef - z, axis=1)))
+    return np.vander(at - t0, 3) @ coef, worst, float(2 * np.linalg.norm(coef[0]))
+
+
+def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
+                      cfg: SmootherConfig | None = None) -> np.ndarray:
+    """``(M,)`` bool: the detections ``(frames (M,) sorted, z (M, 2) px)`` in islands off the track — runs of
+    detections at most ``island_max_s`` long that lie far from the smooth path two runs around them agree on
+    (see the module docstring and :class:`SmootherConfig`). Nearer runs are tried first; dropping an island
+    can let another be judged, so the search repeats (at most 4 rounds)."""
+    cfg = cfg or SmootherConfig()
+    out = np.zeros(len(frames), bool)
+    longest = int(round(cfg.island_max_s * fps))
+    if longest < 1 or len(frames) < cfg.island_min_context + 1:
+        return out
+    reach = max(2, int(round(cfg.island_context_s * fps)))
+    span = max(3, int(round(cfg.island_side_s * fps)))
+    off, max_res = cfg.island_off * width, cfg.island_max_rms * width
+    max_acc = cfg.island_max_acc * width / fps ** 2
+    for _ in range(4):
+        idx = np.flatnonzero(~out)
+        f, p = frames[idx], z[idx]
+        runs = _runs(f, p, cfg.island_jump * width)
+        found = False
+        for k, r in enumerate(runs):
+            if f[r[-1]] - f[r[0]] + 1 > longest:
+                continue
+            before = [b for b in runs[max(0, k - 3):k][::-1] if len(b) >= 4 and not out[idx[b]].any()]
+            after = [a for a in runs[k + 1:k + 4] if len(a) >= 4]
+            for b, a in ((b, a) for b in before for a in after):
+                # the two sides: close enough to bridge, long enough to outweigh the island, 3+ points each
+                if f[a[0]] - f[b[-1]] > reach or len(b) + len(a) < max(cfg.island_min_context, 2 * len(r)):
+                    continue
+                side = np.r_[b[f[b] >= f[b[-1]] - span], a[f[a] <= f[a[0]] + span]]
+                path, res, acc = _bridge(f[side].astype(float), p[side], f[r].astype(float))
+                if res > max_res or acc > max_acc:
+                    continue
+                d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
+                if d > max(off, cfg.island_ratio * res):
+                    out[idx[r]] = found = True
+                    break
+        if not found:
+            break
+    return out
+
+
 def smooth_track(track: BallTrack, width: int, height: int, fps: float,
                  cfg: SmootherConfig | None = None, event_frames=()) -> SmoothResult:
     """Smooth the positions of ``track`` (normalised coordinates) flight by flight.
@@ -184,7 +279,11 @@ def smooth_track(track: BallTrack, width: int, height: int, fps: float,
     seen = np.flatnonzero((vis > 0) & np.isfinite(x) & np.isfinite(y))
     frames = np.asarray(track.frame)[seen]
     z = np.stack([x[seen] * width, y[seen] * height], axis=1) if len(seen) else np.zeros((0, 2))
-    pieces, out = split_pieces(frames, z, fps, cfg, r, q, np.asarray(list(event_frames), dtype=np.int64))
+    islands = off_track_islands(frames, z, fps, width, cfg)
+    keep = np.flatnonzero(~islands)
+    pieces, out = split_pieces(frames[keep], z[keep], fps, cfg, r, q, np.asarray(list(event_frames), dtype=np.int64))
+    pieces = [keep[p] for p in pieces]
+    out = sorted([int(keep[i]) for i in out] + np.flatnonzero(islands).tolist())
     spans = []
     for p in pieces:
         if len(p) >= cfg.min_piece:

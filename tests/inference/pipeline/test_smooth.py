@@ -89,3 +89,50 @@ def test_long_gaps_split_pieces_and_empty_tracks_work(sample):
 def test_bad_settings_are_refused(field, value):
     with pytest.raises(ValueError, match=field):
         SmootherConfig(**{field: value})
+
+
+def _thinned(gt: BallTrack, keep: np.ndarray) -> BallTrack:
+    vis = np.where(keep, gt.visibility, 0)
+    xy = np.where(keep[:, None], gt.xy, np.nan)
+    return BallTrack(gt.frame, vis, xy)
+
+
+def test_islands_off_the_track_are_dropped(sample):
+    """A detector that loses the ball and finds a player's head for a few frames in the gap: the track
+    before and after the gap agree on one path, the island lies far from it and is dropped (the old
+    smoother dropped single outliers only and kept such a run as a flight of its own)."""
+    clip, gt, events = sample
+    w, h, fps = clip.info.width, clip.info.height, clip.info.fps
+    seen = gt.visibility > 0
+    # a stretch of 24 frames seen throughout with no event within it
+    start = next(f for f in gt.frame[20:-40] if seen[f:f + 24].all()
+                 and np.min(np.abs(events.frame - (f + 12))) > 14)
+    keep = seen.copy()
+    keep[start + 7:start + 17] = False                       # the ball lost for 10 frames
+    isl = np.arange(start + 10, start + 13)                  # three detections of something else meanwhile
+    xy = np.where(keep[:, None], gt.xy, np.nan)
+    xy[isl] = gt.xy[isl] + np.array([150 / w, 90 / h]) + np.arange(3)[:, None] * np.array([2 / w, -1 / h])
+    vis = np.where(keep, gt.visibility, 0)
+    vis[isl] = 1
+    res = smooth_track(BallTrack(gt.frame, vis, np.clip(xy, 0, 1)), w, h, fps, event_frames=events.frame)
+    assert set(isl.tolist()) <= set(res.outliers.tolist())
+    assert np.all(res.track.visibility[isl] == 0)
+    assert len(res.outliers) == len(isl)                     # nothing of the ball's own track dropped
+
+
+def test_short_real_pieces_between_contacts_are_kept(sample):
+    """The true track seen only in short runs (2–5 frames, gaps of 3–8): its pieces bend at the bounces and
+    hits, and none may be mistaken for an island."""
+    clip, gt, events = sample
+    w, h, fps = clip.info.width, clip.info.height, clip.info.fps
+    rng = np.random.default_rng(3)
+    keep = np.zeros(len(gt.frame), bool)
+    f = 0
+    while f < len(keep):
+        n = int(rng.integers(2, 6))
+        keep[f:f + n] = True
+        f += n + int(rng.integers(3, 9))
+    track = _thinned(gt, keep & (gt.visibility > 0))
+    res = smooth_track(track, w, h, fps)
+    assert len(res.outliers) == 0
+    assert int(np.sum(res.track.visibility > 0)) == int(np.sum(track.visibility > 0))
