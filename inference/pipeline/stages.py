@@ -524,7 +524,7 @@ def build_stages() -> list[Stage]:
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
               lambda ctx: [ctx.detected_path], _detect_run),
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path, "scenes": _scenes_path(ctx)},
-              lambda ctx: {"smoother": "rts-v2-detections-only"},
+              lambda ctx: {"smoother": "rts-v3-islands"},
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model,
                                       "scenes": _scenes_path(ctx)},
