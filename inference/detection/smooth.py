@@ -47,6 +47,10 @@ class SmootherConfig:
         island_max_acc: the path's acceleration is at most this × the width per s² (a ball's, under gravity and
             perspective, is far less: a path bent more than that joins pieces of two things).
         island_jump: a step larger than this × the width per frame starts a new run.
+        island_speedup: and the ball would have had to fly to the island (or from it back to the track) this many
+            times faster than it moves on either side: a real piece between hidden contacts (a rebound off the
+            glass near the camera) can lie far from the path the sides agree on, but the ball still reaches it;
+            a side's speed counts as at least ``island_min_speed`` × the width per frame.
     """
 
     meas_sigma_px: float = 2.5
@@ -55,7 +59,7 @@ class SmootherConfig:
     gate_chi2: float = GATE_CHI2_2DOF
     min_piece: int = 4
     island_max_s: float = 0.3
-    island_context_s: float = 0.8
+    island_context_s: float = 0.7
     island_side_s: float = 0.3
     island_min_context: int = 5
     island_off: float = 0.03
@@ -63,6 +67,8 @@ class SmootherConfig:
     island_max_acc: float = 3.0
     island_max_rms: float = 0.03
     island_jump: float = 0.04
+    island_speedup: float = 3.0
+    island_min_speed: float = 0.005
 
     def __post_init__(self) -> None:
         for name in ("meas_sigma_px", "jerk_psd", "max_gap_s", "gate_chi2"):
@@ -71,7 +77,7 @@ class SmootherConfig:
                 raise ValueError(f"SmootherConfig.{name} must be a positive number, got {v!r}")
         if self.min_piece < 1:
             raise ValueError(f"SmootherConfig.min_piece must be ≥ 1, got {self.min_piece}")
-        for name in ("island_max_s", "island_context_s", "island_side_s", "island_off", "island_ratio", "island_max_rms",
+        for name in ("island_max_s", "island_context_s", "island_side_s", "island_off", "island_speedup", "island_min_speed", "island_ratio", "island_max_rms",
                      "island_max_acc", "island_jump"):
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0:
@@ -246,12 +252,73 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
                 if res > max_res or acc > max_acc:
                     continue
                 d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
-                if d > max(off, cfg.island_ratio * res):
+                if d > max(off, cfg.island_ratio * res) and _unreachable(f, p, b, r, a, cfg.island_speedup,
+                                                                                     cfg.island_min_speed * width):
                     out[idx[r]] = found = True
                     break
+            if not out[idx[r[0]]] and _jumped_island(f, p, runs, k, out[idx], fps, cfg, width):
+                out[idx[r]] = found = True
         if not found:
             break
     return out
+
+
+def _speed(f: np.ndarray, p: np.ndarray, run: np.ndarray, how=np.median) -> float:
+    """Px per frame of a run's consecutive detections (their median, or ``how``)."""
+    return float(how(np.linalg.norm(np.diff(p[run], axis=0), axis=1) / np.diff(f[run])))
+
+
+def _unreachable(f: np.ndarray, p: np.ndarray, b: np.ndarray, r: np.ndarray, a: np.ndarray, speedup: float,
+                 floor: float) -> bool:
+    """Whether the ball could not have flown to run ``r`` from run ``b`` before it, or from it to run ``a``
+    after it: the straight line across either gap needs over ``speedup`` × the faster side's own speed (their
+    median px per frame, at least ``floor``: a ball at rest before a serve says nothing of the serve's speed) —
+    a hit or a rebound between changes the path, not how far the ball can go in the time."""
+    v = speedup * max(_speed(f, p, b), _speed(f, p, a), floor)
+    into = np.linalg.norm(p[r[0]] - p[b[-1]]) / (f[r[0]] - f[b[-1]])
+    out_of = np.linalg.norm(p[a[0]] - p[r[-1]]) / (f[a[0]] - f[r[-1]])
+    return bool(max(into, out_of) > v)
+
+
+def _jumped_island(f: np.ndarray, p: np.ndarray, runs: list[np.ndarray], k: int, flagged: np.ndarray, fps: float,
+                   cfg: SmootherConfig, width: int) -> bool:
+    """Whether run ``k`` of ``runs`` (indices into ``f (M,)`` frames, ``p (M, 2)`` px) is an island seen from one
+    side only: the track jumps between it and a run next to it (at most 2 frames apart) that holds 4+
+    detections and twice the island's, while on its other side the ball is lost (no detection for 0.12 s,
+    or the track's end); the island holds 2+ detections, the jump is over 3 × the speed of that run and of
+    the island (a ball leaving a hit fast steps as far as it jumps; a shoe does not move), and it lies far (as in
+    :func:`off_track_islands`) from where that run's own quadratic, extrapolated over the gap, puts the ball —
+    a ball cannot jump."""
+    r = runs[k]
+    if len(r) < 2:   # one detection next to a jump may be the ball leaving a hit fast: nothing tells
+        return False
+    lost = max(3, int(round(0.12 * fps)))
+    span = max(3, int(round(cfg.island_side_s * fps)))
+    for j, other in ((k + 1, k - 1), (k - 1, k + 1)):
+        if not 0 <= j < len(runs):
+            continue
+        n = runs[j]
+        if len(n) < max(4, 2 * len(r)) or flagged[n].any():
+            continue
+        near = (f[n[0]] - f[r[-1]]) if j > k else (f[r[0]] - f[n[-1]])
+        far_side = (f[runs[other][-1]] if other < k else f[runs[other][0]]) if 0 <= other < len(runs) else None
+        if near > 2 or (far_side is not None and abs(f[r[0] if other < k else r[-1]] - far_side) <= lost):
+            continue
+        side = n[f[n] <= f[n[0]] + span] if j > k else n[f[n] >= f[n[-1]] - span]
+        if len(side) < 4:
+            continue
+        # the jump must be far beyond what the ball moves there: a fast ball near the camera steps far
+        a, b = (r[-1], n[0]) if j > k else (n[-1], r[0])
+        speed = max(_speed(f, p, side), _speed(f, p, r))
+        if np.linalg.norm(p[b] - p[a]) <= max(cfg.island_off * width, 3 * speed * (f[b] - f[a])):
+            continue
+        path, res, acc = _bridge(f[side].astype(float), p[side], f[r].astype(float))
+        if res > cfg.island_max_rms * width or acc > cfg.island_max_acc * width / fps ** 2:
+            continue
+        d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
+        if d > max(cfg.island_off * width, cfg.island_ratio * res):
+            return True
+    return False
 
 
 def smooth_track(track: BallTrack, width: int, height: int, fps: float,
