@@ -9,10 +9,13 @@ smoothed backwards (RTS), so the positions of a flight use the frames after them
 
 Before that, *islands* are dropped (:func:`off_track_islands`): a short run of detections, cut from the rest
 by gaps or jumps, that lies far from where the track around it says the ball was — a detector that found
-a player's head or a shoe for a few frames while the ball itself was lost. The track on both sides must
-agree on one smooth path across the island (a quadratic through both sides fits them), the island must
-lie far from it, and the sides must be at least as long as the island: a short real piece between two
-contacts bends the path there, so the sides do not agree on one curve and nothing is dropped.
+a player's head or a shoe for a few frames while the ball itself was lost. Seen from both sides, the runs
+around it must agree on one smooth path across the gap (a quadratic through both fits them), the island
+must lie far from that path, and the ball must have been unable to reach it (flying there, or back, would
+take several times its speed on either side): a real piece between hidden contacts (a bounce, a rebound off
+the glass) may lie far from the sides' path, but the ball gets there at its own pace. Seen from one side
+(the ball lost before it, a jump after it back to a longer run, or the mirror), the jump must be far
+beyond what that run and the island move in a frame, and the island far from the run's own path.
 
 Units are pixels of the original frame; the defaults are for 1280-px-wide video and scale with width.
 """
@@ -42,8 +45,8 @@ class SmootherConfig:
             it, from their detections within ``island_side_s`` of the gap; each run holds 4+ detections, both
             together ``island_min_context`` and twice the island's.
         island_off, island_ratio, island_max_rms: an island is off the track when its median distance from
-            that path is over ``island_off`` × the frame width and ``island_ratio`` × the path's RMS on its
-            sides, and the path fits its sides within ``island_max_rms`` × the width.
+            that path is over ``island_off`` × the frame width and ``island_ratio`` × the path's largest
+            residual on its sides, and that residual is at most ``island_max_rms`` × the width.
         island_max_acc: the path's acceleration is at most this × the width per s² (a ball's, under gravity and
             perspective, is far less: a path bent more than that joins pieces of two things).
         island_jump: a step larger than this × the width per frame starts a new run.
@@ -77,7 +80,8 @@ class SmootherConfig:
                 raise ValueError(f"SmootherConfig.{name} must be a positive number, got {v!r}")
         if self.min_piece < 1:
             raise ValueError(f"SmootherConfig.min_piece must be ≥ 1, got {self.min_piece}")
-        for name in ("island_max_s", "island_context_s", "island_side_s", "island_off", "island_speedup", "island_min_speed", "island_ratio", "island_max_rms",
+        for name in ("island_max_s", "island_context_s", "island_side_s", "island_off", "island_speedup",
+                     "island_min_speed", "island_ratio", "island_max_rms",
                      "island_max_acc", "island_jump"):
             v = getattr(self, name)
             if not np.isfinite(v) or v < 0:
