@@ -85,7 +85,8 @@ def test_long_gaps_split_pieces_and_empty_tracks_work(sample):
     assert not any(a < 40 < 80 < b for a, b in res.pieces)
 
 
-@pytest.mark.parametrize("field,value", [("meas_sigma_px", 0.0), ("jerk_psd", float("nan")), ("min_piece", 0)])
+@pytest.mark.parametrize("field,value", [("meas_sigma_px", 0.0), ("jerk_psd", float("nan")), ("min_piece", 0),
+                                         ("island_max_s", -0.1), ("island_speedup", float("inf"))])
 def test_bad_settings_are_refused(field, value):
     with pytest.raises(ValueError, match=field):
         SmootherConfig(**{field: value})
