@@ -28,6 +28,8 @@ import numpy as np
 from inference.clipio import BallTrack
 
 GATE_CHI2_2DOF = 13.8  # chi-square 99.9 % with 2 degrees of freedom
+#: an island seen from one side: the ball lost this long (s) on its other side
+ISLAND_LOST_S = 0.12
 
 
 @dataclass(frozen=True)
@@ -226,8 +228,10 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
                       cfg: SmootherConfig | None = None) -> np.ndarray:
     """``(M,)`` bool: the detections ``(frames (M,) sorted, z (M, 2) px)`` in islands off the track — runs of
     detections at most ``island_max_s`` long that lie far from the smooth path two runs around them agree on
-    (see the module docstring and :class:`SmootherConfig`). Nearer runs are tried first; dropping an island
-    can let another be judged, so the search repeats (at most 4 rounds)."""
+    and out of the ball's reach (:func:`_unreachable`), or that the track jumps away from where the ball is
+    lost on their other side (:func:`_jumped_island`); see the module docstring and :class:`SmootherConfig`.
+    Nearer runs are tried first; dropping an island can let another be judged, so the search repeats (at
+    most 4 rounds)."""
     cfg = cfg or SmootherConfig()
     out = np.zeros(len(frames), bool)
     longest = int(round(cfg.island_max_s * fps))
@@ -248,7 +252,7 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
             before = [b for b in runs[max(0, k - 3):k][::-1] if len(b) >= 4 and not out[idx[b]].any()]
             after = [a for a in runs[k + 1:k + 4] if len(a) >= 4]
             for b, a in ((b, a) for b in before for a in after):
-                # the two sides: close enough to bridge, long enough to outweigh the island, 3+ points each
+                # the two sides: close enough to bridge, long enough (4+ each) to outweigh the island
                 if f[a[0]] - f[b[-1]] > reach or len(b) + len(a) < max(cfg.island_min_context, 2 * len(r)):
                     continue
                 side = np.r_[b[f[b] >= f[b[-1]] - span], a[f[a] <= f[a[0]] + span]]
@@ -256,8 +260,8 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
                 if res > max_res or acc > max_acc:
                     continue
                 d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
-                if d > max(off, cfg.island_ratio * res) and _unreachable(f, p, b, r, a, cfg.island_speedup,
-                                                                                     cfg.island_min_speed * width):
+                far = d > max(off, cfg.island_ratio * res)
+                if far and _unreachable(f, p, b, r, a, cfg.island_speedup, cfg.island_min_speed * width):
                     out[idx[r]] = found = True
                     break
             if not out[idx[r[0]]] and _jumped_island(f, p, runs, k, out[idx], fps, cfg, width):
@@ -288,15 +292,16 @@ def _jumped_island(f: np.ndarray, p: np.ndarray, runs: list[np.ndarray], k: int,
                    cfg: SmootherConfig, width: int) -> bool:
     """Whether run ``k`` of ``runs`` (indices into ``f (M,)`` frames, ``p (M, 2)`` px) is an island seen from one
     side only: the track jumps between it and a run next to it (at most 2 frames apart) that holds 4+
-    detections and twice the island's, while on its other side the ball is lost (no detection for 0.12 s,
-    or the track's end); the island holds 2+ detections, the jump is over 3 × the speed of that run and of
+    detections and twice the island's, while on its other side the ball is lost (no detection for
+    :data:`ISLAND_LOST_S`, or the track's end); the island holds 2+ detections, the jump is over
+    ``island_speedup`` × the speed of that run and of
     the island (a ball leaving a hit fast steps as far as it jumps; a shoe does not move), and it lies far (as in
     :func:`off_track_islands`) from where that run's own quadratic, extrapolated over the gap, puts the ball —
     a ball cannot jump."""
     r = runs[k]
     if len(r) < 2:   # one detection next to a jump may be the ball leaving a hit fast: nothing tells
         return False
-    lost = max(3, int(round(0.12 * fps)))
+    lost = max(3, int(round(ISLAND_LOST_S * fps)))
     span = max(3, int(round(cfg.island_side_s * fps)))
     for j, other in ((k + 1, k - 1), (k - 1, k + 1)):
         if not 0 <= j < len(runs):
@@ -314,7 +319,7 @@ def _jumped_island(f: np.ndarray, p: np.ndarray, runs: list[np.ndarray], k: int,
         # the jump must be far beyond what the ball moves there: a fast ball near the camera steps far
         a, b = (r[-1], n[0]) if j > k else (n[-1], r[0])
         speed = max(_speed(f, p, side), _speed(f, p, r))
-        if np.linalg.norm(p[b] - p[a]) <= max(cfg.island_off * width, 3 * speed * (f[b] - f[a])):
+        if np.linalg.norm(p[b] - p[a]) <= max(cfg.island_off * width, cfg.island_speedup * speed * (f[b] - f[a])):
             continue
         path, res, acc = _bridge(f[side].astype(float), p[side], f[r].astype(float))
         if res > cfg.island_max_rms * width or acc > cfg.island_max_acc * width / fps ** 2:
