@@ -19,6 +19,7 @@ import synth.generate as generate
 from training.datasets import resolve_source
 from training.preflight import PARTIAL, check_data, default_dataset_state, generate_default
 from synth.generate import SynthConfig, generate_dataset
+from synth.partial import read_marker
 
 TINY = {"randomise_camera": False, "width": 160, "height": 96, "codec": "mp4v", "randomise_look": False}
 REAL_CLIP = generate.generate_clip
@@ -43,6 +44,11 @@ def _stopping_after(n_new: int, seeds: list[int]):
     return clip
 
 
+def _marked_done(root) -> dict:
+    """The clips the generation's progress marker records as made ({} while there is none)."""
+    return (read_marker(root) or {}).get("done") or {}
+
+
 def test_ctrl_c_during_generation_is_resumed_never_trained_on(tmp_path, monkeypatch, capsys):
     """The first command's generation (training.preflight.generate_default) in its own process, Ctrl-C once its
     first clip is there: no manifest.yaml; the next run does not take the clips it left for a dataset, it
@@ -57,8 +63,11 @@ def test_ctrl_c_during_generation_is_resumed_never_trained_on(tmp_path, monkeypa
                                 stdout=f, stderr=subprocess.STDOUT,
                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         try:
-            wait_until(lambda: proc.poll() is not None or (root / "clip_0000" / "clip.yaml").is_file(),
-                       what=f"the first clip folder under {root}")
+            # the first clip in place *and* recorded as made (the marker is written just after the clip is moved
+            # into place: a Ctrl-C between the two leaves it to be made again, which is right but made = 0 below)
+            wait_until(lambda: proc.poll() is not None or ((root / "clip_0000" / "clip.yaml").is_file()
+                                                           and "clip_0000" in _marked_done(root)),
+                       what=f"the first clip folder under {root}, recorded as made")
             assert proc.poll() is None, log.read_text()[-3000:]
             proc.send_signal(signal.SIGINT)                       # Ctrl-C
             proc.wait(timeout=300)
