@@ -239,8 +239,6 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
         return out
     reach = max(2, int(round(cfg.island_context_s * fps)))
     span = max(3, int(round(cfg.island_side_s * fps)))
-    off, max_res = cfg.island_off * width, cfg.island_max_rms * width
-    max_acc = cfg.island_max_acc * width / fps ** 2
     for _ in range(4):
         idx = np.flatnonzero(~out)
         f, p = frames[idx], z[idx]
@@ -256,12 +254,8 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
                 if f[a[0]] - f[b[-1]] > reach or len(b) + len(a) < max(cfg.island_min_context, 2 * len(r)):
                     continue
                 side = np.r_[b[f[b] >= f[b[-1]] - span], a[f[a] <= f[a[0]] + span]]
-                path, res, acc = _bridge(f[side].astype(float), p[side], f[r].astype(float))
-                if res > max_res or acc > max_acc:
-                    continue
-                d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
-                far = d > max(off, cfg.island_ratio * res)
-                if far and _unreachable(f, p, b, r, a, cfg.island_speedup, cfg.island_min_speed * width):
+                if _off_path(f, p, side, r, fps, width, cfg) and \
+                        _unreachable(f, p, b, r, a, cfg.island_speedup, cfg.island_min_speed * width):
                     out[idx[r]] = found = True
                     break
             if not out[idx[r[0]]] and _jumped_island(f, p, runs, k, out[idx], fps, cfg, width):
@@ -269,6 +263,19 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
         if not found:
             break
     return out
+
+
+def _off_path(f: np.ndarray, p: np.ndarray, side: np.ndarray, r: np.ndarray, fps: float, width: int,
+              cfg: SmootherConfig) -> bool:
+    """Whether run ``r`` lies off the quadratic path through the detections ``side`` (indices into ``f (M,)``
+    frames, ``p (M, 2)`` px): the path fits them (largest residual ≤ ``island_max_rms`` × the width, acceleration
+    ≤ ``island_max_acc`` × the width per s²) and ``r``'s median distance from it is over ``island_off`` × the
+    width and ``island_ratio`` × that residual."""
+    path, res, acc = _bridge(f[side].astype(float), p[side], f[r].astype(float))
+    if res > cfg.island_max_rms * width or acc > cfg.island_max_acc * width / fps ** 2:
+        return False
+    d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
+    return d > max(cfg.island_off * width, cfg.island_ratio * res)
 
 
 def _speed(f: np.ndarray, p: np.ndarray, run: np.ndarray, how=np.median) -> float:
@@ -321,11 +328,7 @@ def _jumped_island(f: np.ndarray, p: np.ndarray, runs: list[np.ndarray], k: int,
         speed = max(_speed(f, p, side), _speed(f, p, r))
         if np.linalg.norm(p[b] - p[a]) <= max(cfg.island_off * width, cfg.island_speedup * speed * (f[b] - f[a])):
             continue
-        path, res, acc = _bridge(f[side].astype(float), p[side], f[r].astype(float))
-        if res > cfg.island_max_rms * width or acc > cfg.island_max_acc * width / fps ** 2:
-            continue
-        d = float(np.median(np.linalg.norm(p[r] - path, axis=1)))
-        if d > max(cfg.island_off * width, cfg.island_ratio * res):
+        if _off_path(f, p, side, r, fps, width, cfg):
             return True
     return False
 

@@ -98,24 +98,36 @@ def _thinned(gt: BallTrack, keep: np.ndarray) -> BallTrack:
     return BallTrack(gt.frame, vis, xy)
 
 
+def _quiet_start(gt: BallTrack, events, n: int, margin: int) -> int:
+    """The first frame (from 20) of ``n`` frames seen throughout whose middle is over ``margin`` from any event."""
+    seen = gt.visibility > 0
+    return next(f for f in gt.frame[20:-40] if seen[f:f + n].all()
+                and np.min(np.abs(events.frame - (f + n // 2))) > margin)
+
+
+def _with_island(gt: BallTrack, keep: np.ndarray, isl: np.ndarray, xy_isl: np.ndarray) -> BallTrack:
+    """``gt`` seen only where ``keep``, plus detections ``xy_isl`` (K, 2 normalised) of something else at the
+    rows ``isl`` (K,)."""
+    xy = np.where(keep[:, None], gt.xy, np.nan)
+    xy[isl] = xy_isl
+    vis = np.where(keep, gt.visibility, 0)
+    vis[isl] = 1
+    return BallTrack(gt.frame, vis, np.clip(xy, 0, 1))
+
+
 def test_islands_off_the_track_are_dropped(sample):
     """A detector that loses the ball and finds a player's head for a few frames in the gap: the track
     before and after the gap agree on one path, the island lies far from it and is dropped (the old
     smoother dropped single outliers only and kept such a run as a flight of its own)."""
     clip, gt, events = sample
     w, h, fps = clip.info.width, clip.info.height, clip.info.fps
-    seen = gt.visibility > 0
-    # a stretch of 24 frames seen throughout with no event within it
-    start = next(f for f in gt.frame[20:-40] if seen[f:f + 24].all()
-                 and np.min(np.abs(events.frame - (f + 12))) > 14)
-    keep = seen.copy()
+    start = _quiet_start(gt, events, 24, 14)                 # 24 frames seen throughout, no event within
+    keep = gt.visibility > 0
     keep[start + 7:start + 17] = False                       # the ball lost for 10 frames
     isl = np.arange(start + 10, start + 13)                  # three detections of something else meanwhile
-    xy = np.where(keep[:, None], gt.xy, np.nan)
-    xy[isl] = gt.xy[isl] + np.array([150 / w, 90 / h]) + np.arange(3)[:, None] * np.array([2 / w, -1 / h])
-    vis = np.where(keep, gt.visibility, 0)
-    vis[isl] = 1
-    res = smooth_track(BallTrack(gt.frame, vis, np.clip(xy, 0, 1)), w, h, fps, event_frames=events.frame)
+    track = _with_island(gt, keep, isl, gt.xy[isl] + np.array([150 / w, 90 / h])
+                         + np.arange(3)[:, None] * np.array([2 / w, -1 / h]))
+    res = smooth_track(track, w, h, fps, event_frames=events.frame)
     assert set(isl.tolist()) <= set(res.outliers.tolist())
     assert np.all(res.track.visibility[isl] == 0)
     assert len(res.outliers) == len(isl)                     # nothing of the ball's own track dropped
@@ -151,17 +163,13 @@ def test_an_island_before_a_jump_back_to_the_track_is_dropped(sample):
     then the track jumps to the ball and stays on it. The ball cannot jump; the island goes."""
     clip, gt, events = sample
     w, h, fps = clip.info.width, clip.info.height, clip.info.fps
-    seen = gt.visibility > 0
-    start = next(f for f in gt.frame[20:-40] if seen[f:f + 20].all()
-                 and np.min(np.abs(events.frame - (f + 10))) > 12)
-    keep = seen.copy()
+    start = _quiet_start(gt, events, 20, 12)
+    keep = gt.visibility > 0
     keep[start - 8:start + 3] = False                    # the ball lost before the island ...
     isl = np.arange(start, start + 3)                    # ... a shoe 160 px away for three frames ...
-    xy = np.where(keep[:, None], gt.xy, np.nan)
-    xy[isl] = gt.xy[start + 3] + np.array([-160 / w, 60 / h]) + np.arange(3)[:, None] * np.array([0.5 / w, 0])
-    vis = np.where(keep, gt.visibility, 0)
-    vis[isl] = 1                                         # ... then the ball again from start + 3 on
-    res = smooth_track(BallTrack(gt.frame, vis, np.clip(xy, 0, 1)), w, h, fps, event_frames=events.frame)
+    track = _with_island(gt, keep, isl, gt.xy[start + 3] + np.array([-160 / w, 60 / h])
+                         + np.arange(3)[:, None] * np.array([0.5 / w, 0]))   # ... then the ball from start + 3
+    res = smooth_track(track, w, h, fps, event_frames=events.frame)
     assert set(isl.tolist()) <= set(res.outliers.tolist())
     assert len(res.outliers) == len(isl)
 
