@@ -127,7 +127,7 @@ def _run_stage(stage: Stage, ctx: Context, log) -> StageReport:
 def _stage_report(stage: Stage, ctx: Context, log) -> StageReport:
     t0 = time.perf_counter()
     try:
-        key = stage_key(stage.inputs(ctx), stage.params(ctx))
+        key = stage_key(stage.inputs(ctx), stage.params(ctx), stage.code)
         outputs = stage.outputs(ctx)
         if ctx.state.is_current(stage.name, key, outputs):
             rec = ctx.state.stages[stage.name]

@@ -124,6 +124,7 @@ class Stage:
     outputs: Callable[[Context], list[Path]]
     run: Callable[[Context], Outcome]
     requires: tuple[str, ...] = ()  # stages whose success this one needs
+    code: tuple[str, ...] = ()  # modules whose source is part of the key (a code change re-runs the stage)
 
 
 # ------------------------------------------------------------------------------------------- camera
@@ -509,6 +510,12 @@ def _file(name: str) -> Callable[[Context], Path]:
     return lambda ctx: ctx.clip.root / name
 
 
+def _code(*packages: str) -> tuple[str, ...]:
+    """Modules whose source keys a stage: its own ``inference`` packages, the clip format and this file."""
+    return ("inference.clipio", "inference.pipeline.stages", "inference.pipeline.per_scene",
+            *(f"inference.{p}" for p in packages))
+
+
 def build_stages() -> list[Stage]:
     """The stages of ``rally3d infer`` in order."""
     video = lambda ctx: ctx.clip.video_path  # noqa: E731
@@ -516,26 +523,27 @@ def build_stages() -> list[Stage]:
     return [
         Stage("camera", _camera_inputs,
               lambda ctx: {"court": str(ctx.clip.court_path()), "auto": ctx.cfg.auto_court}, _camera_outputs,
-              _camera_run),
+              _camera_run, code=_code("camera", "courtfit", "court")),
         Stage("scenes", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "clip_yaml": ctx.clip.clip_yaml_path},
-              lambda ctx: {"scenes": 1}, lambda ctx: [_scenes_output(ctx)], _scenes_run),
+              lambda ctx: {"scenes": 1}, lambda ctx: [_scenes_output(ctx)], _scenes_run, code=_code("video")),
         Stage("detect", lambda ctx: {"video": video(ctx), "weights": _weights_path(ctx), "scenes": _scenes_path(ctx),
                                      "clip_yaml": ctx.clip.clip_yaml_path, "mask": ctx.clip.root / "mask_auto.yaml"},
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
-              lambda ctx: [ctx.detected_path], _detect_run),
+              lambda ctx: [ctx.detected_path], _detect_run, code=_code("detection", "models", "video")),
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path, "scenes": _scenes_path(ctx)},
               lambda ctx: {"smoother": "rts-v3-islands"},
-              lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",)),
+              lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",), code=_code("detection.smooth")),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model,
                                       "scenes": _scenes_path(ctx)},
-              lambda ctx: {"pose": ctx.cfg.pose, "every": ctx.cfg.pose_every}, _players_outputs, _players_run),
+              lambda ctx: {"pose": ctx.cfg.pose, "every": ctx.cfg.pose_every}, _players_outputs, _players_run,
+              code=_code("players", "models", "camera", "court")),
         Stage("events", _events_inputs, lambda ctx: {"sport": ctx.clip.info.sport, "rally_only": ctx.cfg.rally_only},
               lambda ctx: [ctx.clip.events_path, ctx.clip.root / "rally.yaml"], _events_run,
-              requires=("smooth",)),
+              requires=("smooth",), code=_code("events", "players", "physics", "court")),
         Stage("reconstruct", lambda ctx: {"ball": ctx.clip.ball_path, "events": ctx.clip.events_path,
                                           "camera": camera(ctx), "players": ctx.clip.players_path,
                                           "camera_track": _camera_track_path(ctx), "scenes": _scenes_path(ctx)},
               lambda ctx: {"method": ctx.cfg.method},
               lambda ctx: [ctx.clip.ball_3d_path, ctx.clip.segments_path], _reconstruct_run,
-              requires=("events",)),
+              requires=("events",), code=_code("reconstruct", "physics", "events", "camera", "court")),
     ]

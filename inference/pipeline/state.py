@@ -1,12 +1,15 @@
 """Resumable runs: what each stage consumed and produced, kept in ``<clip>/.rally3d/pipeline.json``.
 
-A stage is skipped when its *key* (the fingerprints of its input files plus its parameters) equals the
-recorded one and its outputs still have the recorded fingerprints. Outputs that exist but were not
+A stage is skipped when its *key* (the fingerprints of its input files, its parameters and the source of
+the code that computes it) equals the recorded one and its outputs still have the recorded fingerprints:
+after an upgrade of rally3d, the stages whose code changed run again instead of keeping stale outputs. Outputs that exist but were not
 written by the pipeline (hand annotations, say) are never overwritten silently.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.util
 import json
 from pathlib import Path
 from typing import Any
@@ -45,10 +48,29 @@ def backup_file(clip_root: Path, path: Path) -> Path:
     return atomic.backup_file(path, Path(clip_root) / STATE_DIR / "backup")
 
 
-def stage_key(inputs: dict[str, Path | None], params: dict[str, Any]) -> str:
-    """Key of one stage run: fingerprints of its inputs (by role) and its parameters."""
+@functools.cache
+def code_fingerprint(modules: tuple[str, ...]) -> str:
+    """sha256 of the Python source of ``modules`` (a package counts with every ``.py`` file under it).
+
+    Raises ModuleNotFoundError for a name that is not importable (a typo in a stage's list must not pass)."""
+    h = hashlib.sha256()
+    for name in sorted(modules):
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.origin is None:
+            raise ModuleNotFoundError(f"no module {name!r} to fingerprint")
+        origin = Path(spec.origin)
+        files = sorted(origin.parent.rglob("*.py")) if origin.name == "__init__.py" else [origin]
+        for f in files:
+            h.update(f"{name}:{f.relative_to(origin.parent).as_posix()}\0".encode())
+            h.update(f.read_bytes())
+    return "sha256:" + h.hexdigest()
+
+
+def stage_key(inputs: dict[str, Path | None], params: dict[str, Any], code: tuple[str, ...] = ()) -> str:
+    """Key of one stage run: fingerprints of its inputs (by role), its parameters and its code's source."""
     blob = json.dumps({"inputs": {k: fingerprint(p) if p is not None else None for k, p in sorted(inputs.items())},
-                       "params": params}, sort_keys=True, default=str)
+                       "params": params, "code": code_fingerprint(tuple(code)) if code else None},
+                      sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 

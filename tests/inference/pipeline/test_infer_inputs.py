@@ -108,6 +108,38 @@ def test_resume_skips_unchanged_stages(tmp_path, capsys):
     assert "camera       done" in capsys.readouterr().out
 
 
+def test_a_code_change_reruns_the_stages_it_touches(tmp_path, capsys, monkeypatch):
+    """An upgrade that changes a stage's code must not keep that stage's stale outputs."""
+    from inference.pipeline import state
+
+    clip = _blank_clip(tmp_path / "c")
+    main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera"])
+    capsys.readouterr()
+    real = state.code_fingerprint
+    changed = lambda mods: real(mods) + ("-new" if "inference.camera" in mods else "")  # noqa: E731
+    monkeypatch.setattr(state, "code_fingerprint", changed)
+    main(["infer", str(clip), "--no-progress", "--pose", "none", "--only", "camera"])
+    assert "camera       done" in capsys.readouterr().out
+
+
+def test_code_fingerprint_follows_the_source(tmp_path, monkeypatch):
+    from inference.pipeline.state import code_fingerprint
+
+    pkg = tmp_path / "fp_pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "mod.py").write_text("X = 1\n")
+    (pkg / "other.py").write_text("Y = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    before = code_fingerprint.__wrapped__(("fp_pkg",))
+    assert code_fingerprint.__wrapped__(("fp_pkg.other",)) != before
+    (pkg / "sub" / "mod.py").write_text("X = 2\n")  # a file deep in the package
+    assert code_fingerprint.__wrapped__(("fp_pkg",)) != before
+    with pytest.raises(ModuleNotFoundError, match="fp_pkg_typo"):
+        code_fingerprint.__wrapped__(("fp_pkg_typo",))
+
+
 def test_several_clips_go_through_lightnings_predict_loop(tmp_path, capsys):
     a, b = _blank_clip(tmp_path / "a"), _blank_clip(tmp_path / "b", n=6)
     code = main(["infer", str(a), str(b), "--out", str(tmp_path / "out"), "--no-progress", "--pose", "none",
