@@ -31,8 +31,8 @@ from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, co
 from .plan import Plan, PlanContact
 from .plausibility import FlightCheck, check_flights, hypotheses, summary
 from .results import RallyFit, SegmentFit
-from .shooting import (BOUNCE_MATERIALS, Chain, HitPrior, Problem, ShootingConfig, Uncertainty, build_chain,
-                       FrameErrorModel, depth_report, frame_error_model, net_height, solve)
+from .shooting import (BOUNCE_MATERIALS, JUMP_SHARE, Chain, HitPrior, Problem, ShootingConfig, Uncertainty,
+                       build_chain, FrameErrorModel, depth_report, frame_error_model, net_height, solve)
 
 __all__ = ["JointConfig", "fit_joint", "net_height"]
 
@@ -55,6 +55,8 @@ class JointConfig(ShootingConfig):
     max_hypotheses: int = 16          # hypotheses screened per failing flight and round (local fits: a few frames)
     verify_hypotheses: int = 3        # the locally best hypotheses of a flight fitted over the whole rally
     max_whole_refits: int = 24        # whole-rally fits the refits may spend in all
+    leave_out_share: float = 0.5      # most of a still failing flight's detections one left-out block may hold
+    leave_out_min_kept: int = 4       # detections that must remain on the flight (on both sides of the block)
     sigma_inflation: float = 1.0      # extra covariance scale on top of the court YAML's `uncertainty`
     sigma_floor_m: float = 0.0        # extra isotropic m added to every frame's σ (the court's floor_m first)
     uncertainty: Uncertainty | None = None  # covariance calibration (None: the court YAML's `uncertainty`)
@@ -288,6 +290,8 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
         return f"only {len(problem.frames)} 2D ball positions between frames {chain.first_frame} and {chain.last_frame}"
     if mute:
         problem.mute(mute)
+    if plan.left_out:
+        problem.leave_out(plan.left_out)
     try:
         sol = solve(problem, theta)
     except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): the plan fails
@@ -518,7 +522,7 @@ def _window(fit: ChainFit, k: int) -> tuple[int, int]:
 def _local_plan(plan: Plan, window: tuple[int, int]) -> Plan | None:
     """The contacts of ``plan`` inside ``window`` (frames), or None when fewer than two are."""
     inside = [c for c in plan.contacts if window[0] <= c.prior.frame <= window[1]]
-    return Plan(inside, plan.notes) if len(inside) >= 2 else None
+    return Plan(inside, plan.notes, plan.left_out) if len(inside) >= 2 else None
 
 
 def _local_score(obs, plan: Plan, window: tuple[int, int], cfg: JointConfig, model, hit_prior, warm
@@ -568,6 +572,8 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
     # one yardstick for every hypothesis: the track between the first and the last event (the free ends beyond
     # are what the track alone pins; a hypothesis that explains them differently is no better for it)
     span = (int(obs.event_frames[0]), int(obs.event_frames[-1]))
+    # a run of detections off the ball first: a contact inserted to explain it would cut the flight in two
+    fit = leave_out_off_runs(obs, fit, cfg, model, hit_prior, span)
     whole_fits = 0
     for _ in range(cfg.max_refits):
         # hypotheses only for flights between two contacts: a free end that does not fit is muted below
@@ -617,6 +623,7 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
                 break
         if not improved:
             break
+    fit = leave_out_off_runs(obs, fit, cfg, model, hit_prior, span)
     failed = [c for c in fit.checks if not c.ok]
     if failed:
         mute = [(c.first, c.last) for c in failed]
@@ -631,6 +638,84 @@ def _refit_bad_flights(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior) -
                         c.ok, c.reason = False, why
             fit = again
     return fit
+
+
+def _detection_runs(obs, first: int, last: int) -> list[np.ndarray]:
+    """Frames of the runs of detections strictly between ``first`` and ``last``: consecutive ones at most 2
+    frames apart whose step per frame stays under half :data:`~.shooting.JUMP_SHARE` of the width (a broadcast
+    ball moves far less: a larger step is the detector moving to something else)."""
+    fr = np.arange(first + 1, last)
+    fr = fr[np.isfinite(obs.uv[fr]).all(axis=1)]
+    if not len(fr):
+        return []
+    step = np.linalg.norm(np.diff(obs.uv[fr], axis=0), axis=1) / np.maximum(np.diff(fr), 1)
+    cut = np.flatnonzero((np.diff(fr) > 2) | (step > 0.5 * JUMP_SHARE * obs.camera.image_size[0])) + 1
+    return np.split(fr, cut)
+
+
+def _blocks(runs: list[np.ndarray], cfg: JointConfig) -> list[np.ndarray]:
+    """Frames of each block of consecutive runs that could be left out: inside the flight (detections kept on
+    both sides), at most ``leave_out_share`` of its detections, at least ``leave_out_min_kept`` left; fewest
+    frames first."""
+    n = sum(len(r) for r in runs)
+    out = []
+    for i in range(1, len(runs) - 1):
+        for j in range(i, len(runs) - 1):
+            block = np.concatenate(runs[i:j + 1])
+            if len(block) <= cfg.leave_out_share * n and n - len(block) >= cfg.leave_out_min_kept:
+                out.append(block)
+    return sorted(out, key=len)
+
+
+def leave_out_off_runs(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior, span: tuple[int, int]) -> ChainFit:
+    """For each flight that still fails after the contact hypotheses: the detector may have spent a run of
+    frames on something else (a player, a racket) inside it — longer than the fit's own outlier rule leaves out
+    (``outlier_run_s``, ``outlier_share``). Try leaving out each block of runs inside the flight (the fewest
+    detections first), fitted locally; keep the first that makes the flight pass with the block far off it
+    (every detection of it beyond ``outlier_k`` σ), verified over the whole rally by the refits' test. The
+    block is reported as detections left out (``outliers_left_out``); a flight no block repairs still fails."""
+    if not cfg.refit:
+        return fit
+    for k in _bad_flights(fit):
+        ch = fit.problem.chain
+        f = ch.flights[k]
+        if f.end is None:
+            continue
+        first, last = int(ch.contacts[f.start].frame), int(ch.contacts[f.end].frame)
+        window = _window(fit, k)
+        warm = _remember(ch, fit.sol.theta)
+        for block in _blocks(_detection_runs(obs, first, last), cfg)[:cfg.max_hypotheses]:
+            plan = replace(fit.plan, left_out=tuple(sorted({*fit.plan.left_out, *map(int, block)})))
+            sub = _local_plan(plan, window)
+            loc = _fit_with_ends(obs, sub, replace(cfg, free_ends=False), model, hit_prior, warm=warm,
+                                 span=(sub.contacts[0].prior.frame, sub.contacts[-1].prior.frame)) if sub else None
+            if loc is None or isinstance(loc, str) or not _passes_without(loc, first, last, block, cfg):
+                continue
+            cand = _fit_with_ends(obs, plan, cfg, model, hit_prior, warm=warm)
+            if isinstance(cand, str) or not _passes_without(cand, first, last, block, cfg):
+                continue
+            n, cost = unexplained(cand, span)
+            if _n_failing(cand) < _n_failing(fit) and _improves(n, cost, _n_failing(cand),
+                                                                 (*unexplained(fit, span), _n_failing(fit)),
+                                                                 _tolerance(obs, span)):
+                cand.plan.notes.append(f"{len(block)} detections (frames {block[0]}–{block[-1]}) off the flight "
+                                       f"{first}–{last} left out")
+                fit = cand
+                break
+    return fit
+
+
+def _passes_without(fit: ChainFit, first: int, last: int, block: np.ndarray, cfg: JointConfig) -> bool:
+    """Whether the chain flight of ``fit`` from contact frame ``first`` to ``last`` passes its checks with every
+    detection of ``block`` (frames) beyond ``outlier_k`` σ of it."""
+    pb = fit.problem
+    ch = pb.chain
+    k = next((i for i, f in enumerate(ch.flights) if f.end is not None
+              and int(ch.contacts[f.start].frame) == first and int(ch.contacts[f.end].frame) == last), None)
+    if k is None or not fit.checks[k].ok:
+        return False
+    at = np.isin(pb.frames, block)
+    return bool(at.any() and np.all(pb.last_norm[at] > cfg.outlier_k))
 
 
 def keeps_flight(failing: np.ndarray) -> bool:

@@ -23,6 +23,9 @@ class Plan:
 
     contacts: list[PlanContact]
     notes: list[str] = field(default_factory=list)
+    #: frames whose detections every fit of this plan leaves out (a run the detector spent off the ball inside a
+    #: flight whose other detections agree: :func:`.joint.leave_out_off_runs`)
+    left_out: tuple[int, ...] = ()
 
     def key(self) -> tuple:
-        return tuple((c.prior.frame, c.prior.label) for c in self.contacts)
+        return (tuple((c.prior.frame, c.prior.label) for c in self.contacts), self.left_out)

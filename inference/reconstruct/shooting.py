@@ -479,6 +479,7 @@ class Problem:
         self.muted = np.zeros(len(self.frames), bool)   # frames left out by the caller (a failing flight's)
         #: short runs of detections the track jumps to and away from (:func:`jump_runs`): left out from the start
         self.jumps = jump_runs(self.frames, self.uv, obs.camera.image_size, obs.fps)
+        self.forced = np.zeros(len(self.frames), bool)  # detections the caller leaves out (:meth:`leave_out`)
         self.outliers = self.jumps.copy()  # detections the fit leaves out (:meth:`find_outliers`)
         self.weights[self.jumps] = 0.0
         self.event_frames = np.array([ct.frame for ct in chain.contacts])
@@ -1008,11 +1009,18 @@ class Problem:
             self.muted |= (self.frames >= a) & (self.frames <= b)
         self.weights[self.muted] = 0.0
 
+    def leave_out(self, frames) -> None:
+        """Leave the detections at ``frames`` out of the fit for good, reported as left out (not muted: the flight
+        owning them is still judged on its other detections)."""
+        self.forced |= np.isin(self.frames, np.asarray(list(frames), np.int64))
+        self.outliers |= self.forced
+        self.weights[self.forced] = 0.0
+
     def reweight(self) -> None:
         """Huber weights from the latest evaluation's reprojection residuals (held fixed while LM runs); muted
         frames and short runs of detections far off the fit (:meth:`find_outliers`) weigh nothing."""
         k = self.cfg.huber_k
-        self.outliers = self.find_outliers() | self.jumps
+        self.outliers = self.find_outliers() | self.jumps | self.forced
         w = np.where(self.last_norm > k, np.sqrt(k / np.maximum(self.last_norm, 1e-12)), 1.0)
         w[self.muted | self.outliers] = 0.0
         self.weights = w
@@ -1023,7 +1031,7 @@ class Problem:
         ``outlier_share`` of their flight's 2D points (a flight whose track is off more than that fails its
         checks instead: nothing hides a wrong flight)."""
         cfg = self.cfg
-        far = (self.last_norm > cfg.outlier_k) & ~self.muted & ~self.jumps
+        far = (self.last_norm > cfg.outlier_k) & ~self.muted & ~self.jumps & ~self.forced
         if not far.any() or self.norm_at is None:
             return np.zeros(len(self.frames), bool)
         own = self.owners(self.frames, self.taus(self.norm_at))
