@@ -62,6 +62,8 @@ class JointConfig(ShootingConfig):
     uncertainty: Uncertainty | None = None  # covariance calibration (None: the court YAML's `uncertainty`)
     max_sigma_m: float = 3.0          # a flight whose median σ exceeds this is reported failed
     max_speed_ms: float = 75.0        # a flight launched faster (270 km/h; records are ~263) is implausible
+    max_spin_rads: float = 600.0      # a flight leaving a racket spinning faster (5,700 rpm; a tennis topspin
+    #                                   reaches ~5,000) is implausible too
 
 
 @dataclass

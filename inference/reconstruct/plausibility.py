@@ -196,12 +196,23 @@ def check_flights(problem: Problem, sol: Solution, cfg: JointConfig) -> list[Fli
         speed = float(np.linalg.norm(sol.theta[f.vel]))
         if f.end is not None and speed > cfg.max_speed_ms:     # a free end's speed is pinned by its track alone
             reasons.append(f"launched at {3.6 * speed:.0f} km/h (> {3.6 * cfg.max_speed_ms:.0f} km/h)")
+        spin = float(np.linalg.norm(sol.theta[f.spin])) if f.spin is not None else 0.0
+        from_racket = not f.lead_in and ch.contacts[f.start].kind == "hit"  # (a bounce may spin it faster: v / r)
+        if from_racket and spin > cfg.max_spin_rads:  # the fit bending the path with spin no racket gives
+            reasons.append(f"spins at {spin * 60 / (2 * np.pi):,.0f} rpm (a racket gives at most "
+                           f"{cfg.max_spin_rads * 60 / (2 * np.pi):,.0f})")
         gained = bounce_gain(problem, sol, s)
         if gained is not None:
             reasons.append(gained)
         for c in judged.get(s, ()):  # its racket hits: where a player struck it, how high, how fast it left
             leaving = speed if c == f.start and f.end is not None and not f.lead_in else None
             reasons += limits.problems(court, ch.point(sol.theta, c), ch.contacts[c].label, leaving)
+        if f.end is not None and ch.contacts[f.end].kind == "hit" and _left_to_a_contact(ch, f.end):
+            # the hit it flies into, judged with the flight leaving it to the next contact: a flight ending where
+            # no player can meet the ball is as wrong as the one leaving from there (a run-out leaving it fails
+            # alone: the flight before it is then put up for refits anyway)
+            reasons += [f"ends at {p}" for p in limits.problems(court, ch.point(sol.theta, f.end),
+                                                                ch.contacts[f.end].label, None)]
         out.append(FlightCheck(not reasons, "; ".join(reasons), first, last, rms, len(e), deepest[0]))
     return out
 
@@ -249,6 +260,11 @@ def structured_misfit(res: np.ndarray, width: int = 5) -> float:
     res = np.where(np.isfinite(res), res, 0.0)
     win = np.lib.stride_tricks.sliding_window_view(res, width, axis=0)      # (M-w+1, 2, w)
     return float(np.max(np.linalg.norm(np.median(win, axis=2), axis=1)))
+
+
+def _left_to_a_contact(ch, c: int) -> bool:
+    """Whether a flight leaves contact ``c`` of chain ``ch`` for another contact (not a run-out)."""
+    return any(f.start == c and f.end is not None and not f.lead_in for f in ch.flights)
 
 
 def _hits_by_flight(ch) -> dict[int, list[int]]:

@@ -157,6 +157,32 @@ def test_the_tennis_sample_with_its_far_hitter_deep_behind_the_baseline_is_judge
             assert limits.problems(court, s.start, "player_far", None) == [], (s.segment, s.start)
 
 
+def test_no_plausible_flight_ends_at_an_impossible_hit_or_spins_beyond_a_racket():
+    """The same misplaced far player: the fit then flew the ball into a far player's hit at the floor (frame
+    72) and out of the near player's hit at 9,900 rpm, and called both flights plausible — only the flight
+    leaving the hit was judged for it, and spin was not judged at all. A flight flying into an impossible hit
+    is as wrong as the one leaving it; a racket gives at most ~5,000 rpm."""
+    from inference.reconstruct.joint import JointConfig
+
+    clip = Clip(SAMPLE / "tennis_sample")
+    obs, _, _ = prepare(clip, Setting(noise_px=2.0, players="gt"))
+    far = obs.players.team == "far"
+    obs.players.court_xy[far, 1] = 23.77 + 9.0
+    fit = fit_joint(obs)
+    court = obs.court
+    limits = HitLimits.from_court(court)
+    ends = [s for s in fit.segments if s.ok and s.end is not None and s.segment.end_event in ("player_near", "player_far")]
+    assert ends
+    for s in ends:
+        assert limits.problems(court, s.end, s.segment.end_event, None) == [], (s.segment, s.end)
+    cap = JointConfig().max_spin_rads
+    from_racket = [s for s in fit.segments if s.ok and s.segment.start_event in ("player_near", "player_far")]
+    assert from_racket
+    for s in from_racket:
+        assert np.linalg.norm(s.spin) <= cap, (s.segment, np.linalg.norm(s.spin))
+    assert any("rpm" in s.reason or "ends at" in s.reason for s in fit.segments if not s.ok)
+
+
 def test_a_hit_whose_hitter_was_not_found_is_not_pulled_to_the_partner(padel):
     """The players stage finds only the partner of the far player who hits the padel sample's lob (frame 147):
     the partner stands ~5 m from the ball's line of sight, beyond any reach, so it is not taken for the hitter
