@@ -2,8 +2,9 @@
 
 A stage is skipped when its *key* (the fingerprints of its input files, its parameters and the source of
 the code that computes it) equals the recorded one and its outputs still have the recorded fingerprints:
-after an upgrade of rally3d, the stages whose code changed run again instead of keeping stale outputs. Outputs that exist but were not
-written by the pipeline (hand annotations, say) are never overwritten silently.
+after an upgrade of rally3d, the stages whose code changed run again instead of keeping stale outputs.
+Outputs that exist but were not written by the pipeline (hand annotations, say) are never overwritten
+silently.
 """
 from __future__ import annotations
 

@@ -687,7 +687,10 @@ def leave_out_off_runs(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior, s
         window = _window(fit, k)
         warm = _remember(ch, fit.sol.theta)
         for block in _blocks(_detection_runs(obs, first, last), cfg)[:cfg.max_hypotheses]:
-            plan = replace(fit.plan, left_out=tuple(sorted({*fit.plan.left_out, *map(int, block)})))
+            note = (int(block[0]), f"{len(block)} detections (frames {block[0]}–{block[-1]}) off the flight "
+                                   f"{first}–{last} left out")
+            plan = replace(fit.plan, notes=[*fit.plan.notes, note],
+                           left_out=tuple(sorted({*fit.plan.left_out, *map(int, block)})))
             sub = _local_plan(plan, window)
             loc = _fit_with_ends(obs, sub, replace(cfg, free_ends=False), model, hit_prior, warm=warm,
                                  span=(sub.contacts[0].prior.frame, sub.contacts[-1].prior.frame)) if sub else None
@@ -700,8 +703,6 @@ def leave_out_off_runs(obs, fit: ChainFit, cfg: JointConfig, model, hit_prior, s
             if _n_failing(cand) < _n_failing(fit) and _improves(n, cost, _n_failing(cand),
                                                                  (*unexplained(fit, span), _n_failing(fit)),
                                                                  _tolerance(obs, span)):
-                cand.plan.notes.append(f"{len(block)} detections (frames {block[0]}–{block[-1]}) off the flight "
-                                       f"{first}–{last} left out")
                 fit = cand
                 break
     return fit

@@ -350,8 +350,10 @@ def test_a_run_of_detections_on_a_player_inside_a_flight_is_left_out(padel):
     from inference.reconstruct.joint import JointConfig
     before = shot(fit_joint(stuck, JointConfig(leave_out_share=0.0)))  # the step off: what the fit did until now
     assert not before.ok, before.figures
-    after = shot(fit_joint(stuck))
+    after_fit = fit_joint(stuck)
+    after = shot(after_fit)
     assert after.ok, after.reason
     assert "frames 110–120" in after.figures.get("outliers_left_out", ""), after.figures
+    assert any(f == 110 and "left out" in note for f, note in after_fit.extra["refits"])
     err = np.linalg.norm(after.xyz - gt.xyz[np.searchsorted(gt.frame, after.frames)], axis=1)
     assert np.max(err) < 0.5, np.max(err)
