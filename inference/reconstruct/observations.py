@@ -280,6 +280,9 @@ def hitter_position(obs: Observations, frame: int, label: str) -> np.ndarray | N
 #: line of sight at a hit is not its hitter (the players stage found the partner, not the hitter: its pull
 #: had sent a real-looking lob 97 px off its track); the margin holds the position's and the hit frame's error
 HITTER_RAY_MARGIN_M = 1.5
+#: with no ball within 2 frames of a hit, its hitter is the player of the team nearest to the line of sight of
+#: the ball seen nearest in time, up to this long (s) before or after (no reach check: the ball has moved)
+HITTER_LOOK_S = 0.4
 
 
 def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
@@ -296,15 +299,18 @@ def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
     if not len(rows):
         return None
     uv, _ = nearest_observed(obs.uv, frame)
-    if uv is None:
-        return int(rows[0])
+    wide = uv is None  # no ball at the hit (a lob out of the picture, a tracker's gap): the nearest one seen
+    if wide:
+        uv, _ = nearest_observed(obs.uv, frame, max(2, int(round(HITTER_LOOK_S * obs.fps))))
+        if uv is None or len(rows) == 1:
+            return int(rows[0])
     o, d = obs.camera.rays(uv[None])
     # distance from each candidate (at 1 m height) to the line of sight
     X = np.column_stack([p.court_xy[rows], np.ones(len(rows))])
     v = X - o
     dist = np.linalg.norm(v - (v @ d[0])[:, None] * d, axis=1)
     k = int(np.argmin(dist))
-    if dist[k] > float(obs.court.hits.reach) + HITTER_RAY_MARGIN_M:
+    if not wide and dist[k] > float(obs.court.hits.reach) + HITTER_RAY_MARGIN_M:
         return None
     return int(rows[k])
 
@@ -347,6 +353,10 @@ def hand_height(obs: Observations, row: int, uv: np.ndarray | None) -> tuple[flo
     shoulders = z[2:]
     raised = bool(np.isfinite(shoulders).all() and hand > shoulders.max() + RAISED_M)
     return hand, raised
+
+
+#: height (m) of a racket hit's first guess when neither the ball nor the hitter's hand says more
+HIT_HEIGHT_GUESS_M = 1.1
 
 
 def hit_point_guess(obs: Observations, uv: np.ndarray, hitter_xy: np.ndarray | None) -> np.ndarray:
@@ -397,6 +407,8 @@ def contact_prior(obs: Observations, frame: int, label: str, unbounded_ok: bool 
         point = hit_point_guess(obs, uv, hitter) if uv is not None else np.full(3, np.nan)
         reason = "" if uv is not None else "no 2D ball near the hit frame"
         hand, raised = hand_height(obs, row, uv) if row is not None else (None, False)
+        if uv is None and hitter is not None:  # no ball near the hit (a lob leaving the picture): at the hitter
+            point = np.r_[hitter, hand if hand is not None else HIT_HEIGHT_GUESS_M]
         return ContactPrior(frame, label, "hit", point, hitter_xy=hitter, hand_z=hand, hand_raised=raised,
                             reason=reason)
     planes = obs.court.planes_for(label)
