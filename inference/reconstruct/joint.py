@@ -66,6 +66,10 @@ class JointConfig(ShootingConfig):
     #                                   reaches ~5,000) is implausible too
 
 
+#: how a plan whose fit diverged is reported (:func:`fit_joint` then fits the rally in two halves)
+DIVERGED = "the fit diverged"
+
+
 @dataclass
 class ChainFit:
     """A fitted chain: the plan, the problem, its solution and the per-flight checks."""
@@ -299,7 +303,7 @@ def _fit_plan(obs: Observations, plan: Plan, cfg: JointConfig, model: FlightMode
     except (ValueError, np.linalg.LinAlgError) as e:   # a wild step (NaN contact time): the plan fails
         # the library's words ("cannot convert float NaN to integer") go to the log, not to the user's reason
         log.debug("the fit of frames %d–%d diverged: %s: %s", chain.first_frame, chain.last_frame, type(e).__name__, e)
-        return (f"the fit diverged between frames {chain.first_frame} and {chain.last_frame} (no consistent flight "
+        return (f"{DIVERGED} between frames {chain.first_frame} and {chain.last_frame} (no consistent flight "
                 "through these contacts: check the 2D ball and the events there)")
     checks = check_flights(problem, sol, cfg)
     return ChainFit(plan, problem, sol, checks)
@@ -454,6 +458,8 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
             fit = _fit_with_ends(obs, plan, cfg, model, hit_prior)
             if not isinstance(fit, str) and cfg.refit:
                 fit = _refit_bad_flights(obs, fit, cfg, model, hit_prior)
+        if isinstance(fit, str) and fit.startswith(DIVERGED) and len(priors) >= 3:
+            return _fit_halves(obs, cfg, model, fit, t0, c0)
         if isinstance(fit, str):
             fits = [SegmentFit.failed(s, fit) for s in segs]
         else:
@@ -466,6 +472,32 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
     fits = [f for f in fits if f.ok or obs.single_event or f.segment.index not in (-1, len(obs.event_frames) - 1)]
     out = RallyFit("joint", obs.fps, fits, time.perf_counter() - t0, extra=extra,
                    cpu_seconds=time.process_time() - c0, error_model=error_model)
+    out.extra["plausibility"] = summary(out, obs, cfg.rms_fail_factor * cfg.pixel_sigma)
+    return out
+
+
+def _fit_halves(obs: Observations, cfg: JointConfig, model: FlightModel, why: str, t0: float, c0: float) -> RallyFit:
+    """A rally whose whole fit diverged, fitted as two rallies sharing its middle event (each split again if it
+    diverges too): one wild region no longer costs the whole clip its 3D. The first half keeps its lead-in and
+    the flights up to the middle event, the second its flights from there and its run-out."""
+    E = len(obs.event_frames)
+    mid = E // 2
+    halves = []
+    for lo, hi in ((0, mid), (mid, E - 1)):
+        sub = replace(obs, event_frames=obs.event_frames[lo:hi + 1], event_labels=list(obs.event_labels[lo:hi + 1]))
+        halves.append((lo, fit_joint(sub, cfg, model=model)))
+    fits, refits, iterations = [], [], []
+    for lo, half in halves:
+        keep = (lambda i: i < mid) if lo == 0 else (lambda i: i >= 0)  # noqa: E731 — the shared event's flights once
+        fits += [replace(f, segment=replace(f.segment, index=f.segment.index + lo))
+                 for f in half.segments if keep(f.segment.index)]
+        refits += half.extra.get("refits", [])
+        iterations += half.extra.get("iterations", [])
+    note = (f"{why}; fitted as two rallies split at the event at frame {int(obs.event_frames[mid])}")
+    log.info(note)
+    out = RallyFit("joint", obs.fps, fits, time.perf_counter() - t0, cpu_seconds=time.process_time() - c0,
+                   extra={"split": note, **({"refits": refits} if refits else {}),
+                          **({"iterations": iterations} if iterations else {})})
     out.extra["plausibility"] = summary(out, obs, cfg.rms_fail_factor * cfg.pixel_sigma)
     return out
 
