@@ -203,9 +203,9 @@ def split_pieces(frames: np.ndarray, z: np.ndarray, fps: float, cfg: SmootherCon
     return [np.asarray(p) for p in pieces], outliers
 
 
-def _runs(frames: np.ndarray, z: np.ndarray, jump: float) -> list[np.ndarray]:
-    """Index runs of detections ``(frames (M,), z (M, 2) px)``: consecutive ones at most 2 frames apart whose
-    step per frame stays below ``jump`` px."""
+def track_runs(frames: np.ndarray, z: np.ndarray, jump: float) -> list[np.ndarray]:
+    """Index runs of detections ``(frames (M,) sorted, z (M, 2) px)``: consecutive ones at most 2 frames apart
+    whose step per frame stays below ``jump`` px (a larger step is the detector moving to something else)."""
     if not len(frames):
         return []
     gap = np.diff(frames)
@@ -242,7 +242,7 @@ def off_track_islands(frames: np.ndarray, z: np.ndarray, fps: float, width: int,
     for _ in range(4):
         idx = np.flatnonzero(~out)
         f, p = frames[idx], z[idx]
-        runs = _runs(f, p, cfg.island_jump * width)
+        runs = track_runs(f, p, cfg.island_jump * width)
         found = False
         for k, r in enumerate(runs):
             if f[r[-1]] - f[r[0]] + 1 > longest:

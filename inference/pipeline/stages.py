@@ -531,7 +531,7 @@ def build_stages() -> list[Stage]:
               lambda ctx: {"model": ctx.cfg.detector, "step": ctx.cfg.step},
               lambda ctx: [ctx.detected_path], _detect_run, code=_code("detection", "models", "video")),
         Stage("smooth", lambda ctx: {"detected": ctx.detected_path, "scenes": _scenes_path(ctx)},
-              lambda ctx: {"smoother": "rts-v3-islands"},
+              lambda ctx: {},  # its version is its code's (Stage.code)
               lambda ctx: [ctx.clip.ball_path], _smooth_run, requires=("detect",), code=_code("detection.smooth")),
         Stage("players", lambda ctx: {"video": video(ctx), "camera": camera(ctx), "model": ctx.cfg.pose_model,
                                       "scenes": _scenes_path(ctx)},
@@ -545,5 +545,6 @@ def build_stages() -> list[Stage]:
                                           "camera_track": _camera_track_path(ctx), "scenes": _scenes_path(ctx)},
               lambda ctx: {"method": ctx.cfg.method},
               lambda ctx: [ctx.clip.ball_3d_path, ctx.clip.segments_path], _reconstruct_run,
-              requires=("events",), code=_code("reconstruct", "physics", "events", "camera", "court")),
+              requires=("events",),
+              code=_code("reconstruct", "detection.smooth", "physics", "events", "camera", "court")),
     ]

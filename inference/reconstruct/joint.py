@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from inference.detection.smooth import track_runs
 from inference.physics import FlightModel
 
 from .observations import PLAYER_EVENTS, ContactPrior, Observations, Segment, contact_priors, nearest_observed
@@ -487,10 +488,9 @@ def _fit_halves(obs: Observations, cfg: JointConfig, model: FlightModel, why: st
         sub = replace(obs, event_frames=obs.event_frames[lo:hi + 1], event_labels=list(obs.event_labels[lo:hi + 1]))
         halves.append((lo, fit_joint(sub, cfg, model=model)))
     fits, refits, iterations = [], [], []
-    for lo, half in halves:
-        keep = (lambda i: i < mid) if lo == 0 else (lambda i: i >= 0)  # noqa: E731 — the shared event's flights once
-        fits += [replace(f, segment=replace(f.segment, index=f.segment.index + lo))
-                 for f in half.segments if keep(f.segment.index)]
+    for lo, half in halves:  # the flights of the shared middle event once: the first half's run-out goes
+        fits += [replace(f, segment=replace(f.segment, index=f.segment.index + lo)) for f in half.segments
+                 if (f.segment.index < mid if lo == 0 else f.segment.index >= 0)]
         refits += half.extra.get("refits", [])
         iterations += half.extra.get("iterations", [])
     note = (f"{why}; fitted as two rallies split at the event at frame {int(obs.event_frames[mid])}")
@@ -680,11 +680,7 @@ def _detection_runs(obs, first: int, last: int) -> list[np.ndarray]:
     ball moves far less: a larger step is the detector moving to something else)."""
     fr = np.arange(first + 1, last)
     fr = fr[np.isfinite(obs.uv[fr]).all(axis=1)]
-    if not len(fr):
-        return []
-    step = np.linalg.norm(np.diff(obs.uv[fr], axis=0), axis=1) / np.maximum(np.diff(fr), 1)
-    cut = np.flatnonzero((np.diff(fr) > 2) | (step > 0.5 * JUMP_SHARE * obs.camera.image_size[0])) + 1
-    return np.split(fr, cut)
+    return [fr[r] for r in track_runs(fr, obs.uv[fr], 0.5 * JUMP_SHARE * obs.camera.image_size[0])]
 
 
 def _blocks(runs: list[np.ndarray], cfg: JointConfig) -> list[np.ndarray]:

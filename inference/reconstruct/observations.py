@@ -288,7 +288,9 @@ HITTER_LOOK_S = 0.4
 def hitter_row(obs: Observations, frame: int, label: str) -> int | None:
     """players.csv row of the hitter of a racket hit at ``frame`` (see :func:`hitter_position`): players of
     the named team, or, where players.csv has no team, on that side of the net; None when the nearest of them
-    stands farther from the ball's line of sight than the reach allows (:data:`HITTER_RAY_MARGIN_M`)."""
+    stands farther from the ball's line of sight than the reach allows (:data:`HITTER_RAY_MARGIN_M`). With no
+    ball within 2 frames of the hit, the line of sight of the ball seen nearest in time (:data:`HITTER_LOOK_S`)
+    decides, without the reach check."""
     if obs.players is None or label not in PLAYER_EVENTS:
         return None
     team = label.split("_")[1]
