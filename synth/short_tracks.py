@@ -67,7 +67,7 @@ SHOTS: dict[str, Shots] = {
 }
 
 
-#: (eye, target, horizontal field of view) of the side, oblique and behind views of each sport's short
+#: (eye, target, horizontal field of view) of the side, oblique, behind and facing views of each sport's short
 #: tracks (``bench/bench_short_tracks.py`` and the short-track tests)
 VIEWS: dict[str, dict[str, tuple]] = {
     "tennis": {
@@ -76,12 +76,17 @@ VIEWS: dict[str, dict[str, tuple]] = {
         "behind": ((5.5, -10.0, 5.0), (5.5, 12.0, 0.0), 45.0),
         # a broadcast's long lens 22 m behind the near baseline, 9 m up: it looks along the flights
         "behind 22 m": ((5.5, -22.0, 9.0), (5.5, 12.0, 0.0), 30.0),
+        # the same camera behind the far baseline: the shots fly at it (half of a rally's shots)
+        "facing 22 m": ((5.5, 23.77 + 22.0, 9.0), (5.5, 11.9, 0.0), 30.0),
     },
     # the table (1.525 x 2.74 m, top 0.76 m) seen from 3-4 m, as the motion-capture rooms film it
     "table_tennis": {
         "side": ((-4.0, 1.0, 1.8), (0.76, 1.0, 0.76), 65.0),
         "oblique": ((-2.6, -2.0, 2.2), (0.76, 1.2, 0.76), 60.0),
         "behind": ((0.76, -3.4, 2.0), (0.76, 1.6, 0.76), 50.0),
+        # behind the far end: the shots fly at the camera (a rally's other half), from 3.4 m and from 6 m
+        "facing": ((0.76, 2.74 + 3.4, 2.0), (0.76, 1.14, 0.76), 50.0),
+        "facing 6 m": ((0.76, 2.74 + 6.0, 3.0), (0.76, 1.14, 0.76), 35.0),
     },
 }
 #: how far beside the ball the hitter's body is drawn (m): a tennis player reaches farther than a table-tennis one
