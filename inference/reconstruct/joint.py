@@ -494,9 +494,9 @@ def _depth_starts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> list[np
 
 
 def _depth_restarts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> ChainFit:
-    """The rally's first fit started again from other depths along the lines of sight (:func:`_depth_starts`),
-    at most ``depth_restarts`` times; a restart that ends with a lower cost (by :data:`RESTART_GAIN`), no more
-    failing flights and no more detections left out replaces it.
+    """The rally's fit (after its refits: the events settled) started again from other depths along the lines
+    of sight (:func:`_depth_starts`), at most ``depth_restarts`` times; a restart that ends with a lower cost (by
+    :data:`RESTART_GAIN`), no flight failing that passed and no more detections left out replaces it.
 
     Seen from behind the play, the 2D track hardly says how far along the line of sight a racket hit or a
     free end lies, and the first guess (vacuum parabolas, no drag) picks a depth the fit then stays near:
@@ -506,7 +506,6 @@ def _depth_restarts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> Chain
         return fit
     best = fit
     best_cost = float(fit.sol.r @ fit.sol.r)
-    best_ok = sum(c.ok for c in fit.checks)
     for start in _depth_starts(obs, fit, cfg)[:cfg.depth_restarts]:
         pb = _fresh_problem(fit)
         try:
@@ -517,9 +516,10 @@ def _depth_restarts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> Chain
         if not np.isfinite(cost) or cost > best_cost * (1.0 - RESTART_GAIN):
             continue
         checks = check_flights(pb, sol, cfg)
-        if sum(c.ok for c in checks) < best_ok or pb.outliers.sum() > best.problem.outliers.sum():
+        if any(old.ok and not new.ok for old, new in zip(best.checks, checks)) \
+                or pb.outliers.sum() > best.problem.outliers.sum():
             continue
-        best, best_cost, best_ok = ChainFit(fit.plan, pb, sol, checks), cost, sum(c.ok for c in checks)
+        best, best_cost = ChainFit(fit.plan, pb, sol, checks), cost
         log.debug("a fit started from another depth along the line of sight lowered the cost to %.1f", cost)
     return best
 
@@ -571,10 +571,10 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
         plan = Plan([PlanContact(p, i) for i, p in enumerate(priors)])
         with threadpool_limits(1):  # small dense solves: BLAS threads only add contention
             fit = _fit_with_ends(obs, plan, cfg, model, hit_prior)
-            if not isinstance(fit, str):
-                fit = _depth_restarts(obs, fit, cfg)
             if not isinstance(fit, str) and cfg.refit:
                 fit = _refit_bad_flights(obs, fit, cfg, model, hit_prior)
+            if not isinstance(fit, str):
+                fit = _depth_restarts(obs, fit, cfg)
         if isinstance(fit, str) and fit.startswith(DIVERGED) and len(priors) >= 3:
             return _fit_halves(obs, cfg, model, fit, t0, c0)
         if isinstance(fit, str):
