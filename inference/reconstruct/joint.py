@@ -494,9 +494,11 @@ def _depth_starts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> list[np
 
 
 def _depth_restarts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> ChainFit:
-    """The rally's fit (after its refits: the events settled) started again from other depths along the lines
-    of sight (:func:`_depth_starts`), at most ``depth_restarts`` times; a restart that ends with a lower cost (by
-    :data:`RESTART_GAIN`), no flight failing that passed and no more detections left out replaces it.
+    """The rally's first fit started again from other depths along the lines of sight (:func:`_depth_starts`), at
+    most ``depth_restarts`` times, before the refits (a wrong depth fails checks — a hit on the far side — and
+    the refits would change the events to explain it). A restart replaces the fit when it ends with a lower cost
+    (by :data:`RESTART_GAIN`), no flight failing that passed, no more detections left out and, when flights
+    fail, fewer failing (their cost dominates: a lower cost alone had moved a passing flight under the floor).
 
     Seen from behind the play, the 2D track hardly says how far along the line of sight a racket hit or a
     free end lies, and the first guess (vacuum parabolas, no drag) picks a depth the fit then stays near:
@@ -516,7 +518,8 @@ def _depth_restarts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> Chain
         if not np.isfinite(cost) or cost > best_cost * (1.0 - RESTART_GAIN):
             continue
         checks = check_flights(pb, sol, cfg)
-        if any(old.ok and not new.ok for old, new in zip(best.checks, checks)) \
+        failing, now_failing = sum(not c.ok for c in best.checks), sum(not c.ok for c in checks)
+        if any(old.ok and not new.ok for old, new in zip(best.checks, checks)) or (failing and now_failing >= failing) \
                 or pb.outliers.sum() > best.problem.outliers.sum():
             continue
         best, best_cost = ChainFit(fit.plan, pb, sol, checks), cost
@@ -571,10 +574,10 @@ def fit_joint(obs: Observations, config: JointConfig | None = None, priors: list
         plan = Plan([PlanContact(p, i) for i, p in enumerate(priors)])
         with threadpool_limits(1):  # small dense solves: BLAS threads only add contention
             fit = _fit_with_ends(obs, plan, cfg, model, hit_prior)
-            if not isinstance(fit, str) and cfg.refit:
-                fit = _refit_bad_flights(obs, fit, cfg, model, hit_prior)
             if not isinstance(fit, str):
                 fit = _depth_restarts(obs, fit, cfg)
+            if not isinstance(fit, str) and cfg.refit:
+                fit = _refit_bad_flights(obs, fit, cfg, model, hit_prior)
         if isinstance(fit, str) and fit.startswith(DIVERGED) and len(priors) >= 3:
             return _fit_halves(obs, cfg, model, fit, t0, c0)
         if isinstance(fit, str):
