@@ -7,6 +7,10 @@ contact whose line of sight misses its surface or that has no 2D ball near it is
 starts between its neighbours and is fitted like any other); a landing beyond a surface's polygon is fitted
 on the unbounded plane and flagged.
 
+Seen from behind the play the 2D track hardly says how far along the line of sight a racket hit or a free end
+lies (a ball flying at the camera draws nearly the track of one flying away): the first fit is started again
+from other depths there and the lowest-cost fit kept (:func:`_depth_restarts`).
+
 Then the court is enforced (:mod:`.plausibility`): a flight whose reprojection RMS is far above the 2D noise
 (or that leaves the court) is refitted under other contact hypotheses — a missed bounce, another surface,
 another event class, no contact at all — and the best hypothesis is kept when it explains the track; what
