@@ -154,6 +154,17 @@ def _init_points(obs: Observations, chain: Chain, theta: np.ndarray) -> bool:
     return True
 
 
+def _hit_span(obs: Observations, o: np.ndarray, d: np.ndarray) -> tuple[float, float] | None:
+    """Distances (s_lo, s_hi) along the ray o + s·d (d a unit (3,) vector) between the court's lowest and highest
+    hit heights, at least 0.5 m in front; None when the ray is level or the span is empty."""
+    if abs(d[2]) < 1e-6:
+        return None
+    lo, hi = obs.court.hits.height
+    s_lo, s_hi = sorted(((lo - o[2]) / d[2], (hi - o[2]) / d[2]))
+    s_lo = max(s_lo, 0.5)
+    return (s_lo, s_hi) if s_hi > s_lo else None
+
+
 def _init_hits(obs: Observations, chain: Chain, theta: np.ndarray, cfg: JointConfig) -> None:
     """Place each racket hit on its line of sight at the depth whose neighbouring vacuum parabolas best
     explain the 2D track (two sweeps, so neighbouring hits settle together)."""
@@ -168,12 +179,10 @@ def _init_hits(obs: Observations, chain: Chain, theta: np.ndarray, cfg: JointCon
                 continue
             o, d = obs.camera.rays(uv[None])
             o, d = o[0], d[0]
-            if abs(d[2]) < 1e-6:
+            span = _hit_span(obs, o, d)
+            if span is None:
                 continue
-            s_lo, s_hi = sorted(((hits.height[0] - o[2]) / d[2], (hits.height[1] - o[2]) / d[2]))
-            s_lo = max(s_lo, 0.5)
-            if s_hi <= s_lo:
-                continue
+            s_lo, s_hi = span
             cand = o + np.linspace(s_lo, s_hi, cfg.hit_candidates)[:, None] * d
             if ct.prior.hitter_xy is not None:
                 near = np.linalg.norm(cand[:, :2] - ct.prior.hitter_xy, axis=1) <= hits.reach
@@ -430,28 +439,10 @@ def _fresh_problem(fit: ChainFit) -> Problem:
     """A new problem for the same chain, with the same frames muted and left out by the caller."""
     old = fit.problem
     pb = Problem(old.obs, old.chain, old.cfg, old.model, old.hit_prior)
-    if old.muted.any():
-        pb.muted |= old.muted
-        pb.weights[pb.muted] = 0.0
-    if old.forced.any():
-        pb.forced |= old.forced
-        pb.outliers |= old.forced
-        pb.weights[pb.forced] = 0.0
+    pb.muted |= old.muted
+    pb.weights[pb.muted] = 0.0
+    pb.leave_out(old.frames[old.forced])
     return pb
-
-
-def _hit_depths(obs: Observations, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float] | None:
-    """The line of sight through a hit point ``p`` (3,): camera centre, direction, and the distances along it
-    between the court's lowest and highest hit heights (None when the ray is level)."""
-    o = obs.camera.centre
-    d = p - o
-    d = d / np.linalg.norm(d)
-    if abs(d[2]) < 1e-6:
-        return None
-    lo, hi = obs.court.hits.height
-    s_lo, s_hi = sorted(((lo - o[2]) / d[2], (hi - o[2]) / d[2]))
-    s_lo = max(s_lo, 0.5)
-    return (o, d, s_lo, s_hi) if s_hi > s_lo else None
 
 
 def _depth_starts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> list[np.ndarray]:
@@ -469,11 +460,14 @@ def _depth_starts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> list[np
     for c, ct in enumerate(ch.contacts):
         if ct.kind != "hit" or ct.prior.hitter_xy is not None:
             continue
-        ray = _hit_depths(obs, ch.point(theta, c))
-        if ray is None:
+        o = obs.camera.centre
+        d = ch.point(theta, c) - o
+        s_now = float(np.linalg.norm(d))
+        span = _hit_span(obs, o, d / s_now)
+        if span is None:
             continue
-        o, d, s_lo, s_hi = ray
-        s_now = float(np.linalg.norm(ch.point(theta, c) - o))
+        s_lo, s_hi = span
+        d = d / s_now
         for s_new in np.linspace(s_lo, s_hi, 4):
             if abs(s_new - s_now) < (s_hi - s_lo) / 4:
                 continue
