@@ -463,11 +463,11 @@ def _depth_starts(obs: Observations, fit: ChainFit, cfg: JointConfig) -> list[np
         o = obs.camera.centre
         d = ch.point(theta, c) - o
         s_now = float(np.linalg.norm(d))
-        span = _hit_span(obs, o, d / s_now)
+        d = d / s_now
+        span = _hit_span(obs, o, d)
         if span is None:
             continue
         s_lo, s_hi = span
-        d = d / s_now
         for s_new in np.linspace(s_lo, s_hi, 4):
             if abs(s_new - s_now) < (s_hi - s_lo) / 4:
                 continue
